@@ -1,0 +1,44 @@
+# apc — two commands do everything on a fresh Debian/Ubuntu machine with Python 3.11+:
+#   make run    set up .venv and run the paper experiment
+#   make test   set up .venv and run the whole test suite
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(VENV)/bin/pip
+PKGS   := src/apc_msgs_py src/apc_feedforward src/apc_feedback src/apc_plant_sim
+STAMP  := $(VENV)/.apc-installed
+
+.PHONY: setup test test-fast lint run bench colcon clean
+
+setup: $(STAMP)
+
+$(STAMP): requirements.txt constraints.txt $(foreach p,$(PKGS),$(p)/setup.py)
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade "pip==26.3"
+	$(PIP) install -q "setuptools==79.0.1"
+	$(PIP) install -q -r requirements.txt -c constraints.txt
+	$(PIP) install -q --no-deps --no-build-isolation $(foreach p,$(PKGS),-e $(p))
+	touch $(STAMP)
+
+test: setup
+	$(VENV)/bin/pytest
+
+test-fast: setup
+	$(VENV)/bin/pytest -m "not slow"
+
+lint: setup
+	$(VENV)/bin/ruff check src test bench tools
+	$(VENV)/bin/ruff format --check src test bench tools
+
+run: setup
+	$(VENV)/bin/experiment --case c --controller adaptive --out runs
+
+bench: setup
+	$(PY) bench/run_all.py
+
+colcon: setup
+	rm -rf build install log
+	$(VENV)/bin/colcon build --base-paths src
+
+clean:
+	rm -rf build install log .pytest_cache
