@@ -1,26 +1,29 @@
 from setuptools import find_packages, setup
 
-package_name = 'apc_plant_sim'
+package_name = "apc_plant_sim"
 
 setup(
     name=package_name,
-    version='0.1.0',
-    packages=find_packages(exclude=['test']),
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
     data_files=[
-        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
-        ('share/' + package_name, ['package.xml']),
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
     ],
-    install_requires=['setuptools'],
+    install_requires=["setuptools"],
     zip_safe=True,
-    maintainer='apc maintainers',
-    maintainer_email='apc-maintainers@example.org',
-    description='Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and plots for apc.',
-    license='Apache-2.0',
+    maintainer="apc maintainers",
+    maintainer_email="apc-maintainers@example.org",
+    description=(
+        "Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and"
+        " plots for apc."
+    ),
+    license="Apache-2.0",
     entry_points={
-        'console_scripts': [
-            'plant_node = apc_plant_sim.node:main',
-            'experiment = apc_plant_sim.experiment:main',
-            'analyze = apc_plant_sim.analyze:main',
+        "console_scripts": [
+            "plant_node = apc_plant_sim.node:main",
+            "experiment = apc_plant_sim.experiment:main",
+            "analyze = apc_plant_sim.analyze:main",
         ],
     },
 )

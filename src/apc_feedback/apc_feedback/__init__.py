@@ -1,1 +1,3 @@
-"""Recursive least-squares identification of the perturbation model and one-step optimal feedback for apc, plus computed-torque and PD baselines."""
+"""Recursive least-squares identification of the perturbation model and one-step optimal feedback
+for apc, plus computed-torque and PD baselines.
+"""

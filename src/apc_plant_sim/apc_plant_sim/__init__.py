@@ -1,1 +1,3 @@
-"""Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and plots for apc."""
+"""Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and plots
+for apc.
+"""

@@ -1,0 +1,304 @@
+"""One-step optimal perturbation control (paper Eqs. 34-35, Eq. 35 corrected).
+
+At each sample the feedback minimises the one-step cost of Eq. 34,
+
+    J(k) = ½ [x(k+1)ᵀ Q x(k+1) + u(k)ᵀ R u(k)],
+
+subject to the identified model of Eq. 16, ``x(k+1) = F x(k) + G u(k) + w``. Here ``x`` is
+the perturbation state δx ∈ R^p (p = 2n for an arm) and ``u`` the perturbation torque
+δu ∈ R^n. Setting ``∂J/∂u = Gᵀ Q (F x + G u + w) + R u = 0`` gives the exact minimiser
+
+    u* = -(R + Gᵀ Q G)⁻¹ Gᵀ Q (F x + w)            (Eq. 35 corrected, ``form="exact"``)
+
+unique because ``R ≻ 0`` and ``Q ⪰ 0`` make ``R + Gᵀ Q G ≻ 0``. The paper prints
+
+    u  = -(R + Gᵀ Q G)⁻¹ Gᵀ Q F (x + w)            (Eq. 35 as printed, ``form="printed"``)
+
+which applies ``F`` to the bias as well; the two agree when ``w = 0`` or ``F = I``. See
+``/work/shared/DESIGN.md``, "Where the printed paper is wrong".
+
+The linear system is solved (``numpy.linalg.solve``), never inverted. No ROS here.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+
+__all__ = [
+    "ControlError",
+    "closed_loop_eigenvalues",
+    "one_step_control",
+    "one_step_cost",
+    "one_step_gain",
+    "validate_weights",
+]
+
+Form = Literal["exact", "printed"]
+_FORMS: tuple[str, ...] = ("exact", "printed")
+
+
+class ControlError(ValueError):
+    """A bad argument to the one-step optimal control (the message names it)."""
+
+
+# ---------------------------------------------------------------------------------- validation
+def _array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a finite float64 array of exactly ``shape``."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ControlError(f"{name} must be a real array of shape {shape}") from None
+    if a.shape != shape:
+        raise ControlError(f"{name} must have shape {shape}, got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ControlError(f"{name} must be finite")
+    return a
+
+
+def _model(F: Any, G: Any) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Validate F (p, p) and G (p, n); return them with p and n."""
+    try:
+        Fa = np.asarray(F, dtype=float)
+    except (TypeError, ValueError):
+        raise ControlError("F must be a real (p, p) array") from None
+    if Fa.ndim != 2 or Fa.shape[0] != Fa.shape[1] or Fa.shape[0] < 1:
+        raise ControlError(f"F must be square (p, p) with p >= 1, got shape {Fa.shape}")
+    p = Fa.shape[0]
+    if not np.isfinite(Fa).all():
+        raise ControlError("F must be finite")
+    try:
+        Ga = np.asarray(G, dtype=float)
+    except (TypeError, ValueError):
+        raise ControlError(f"G must be a real ({p}, n) array") from None
+    if Ga.ndim != 2 or Ga.shape[0] != p or Ga.shape[1] < 1:
+        raise ControlError(f"G must have shape ({p}, n) with n >= 1, got {Ga.shape}")
+    if not np.isfinite(Ga).all():
+        raise ControlError("G must be finite")
+    return Fa, Ga, p, Ga.shape[1]
+
+
+def validate_weights(Q: Any, R: Any, p: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Check the weights of Eq. 34 once.
+
+    Parameters
+    ----------
+    Q : array_like, shape (p, p)
+        State weight, symmetric positive semidefinite (symmetric to a relative 1e-10).
+    R : array_like, shape (n, n)
+        Input weight, symmetric positive definite.
+    p, n : int
+        State and input dimensions.
+
+    Returns
+    -------
+    (Q, R) : tuple of numpy.ndarray
+        The weights as float64 arrays, exactly symmetrised.
+
+    Raises
+    ------
+    ControlError
+        "Q must ..." / "R must ..." on a wrong shape, a non-finite entry, asymmetry, ``Q`` with
+        a negative eigenvalue, or ``R`` not positive definite.
+    """
+    Qa = _array("Q", Q, (p, p))
+    Ra = _array("R", R, (n, n))
+    for name, a in (("Q", Qa), ("R", Ra)):
+        scale = max(1.0, float(np.max(np.abs(a))))
+        if np.max(np.abs(a - a.T)) > 1e-10 * scale:
+            raise ControlError(f"{name} must be symmetric")
+    Qa = 0.5 * (Qa + Qa.T)
+    Ra = 0.5 * (Ra + Ra.T)
+    eig_q = np.linalg.eigvalsh(Qa)
+    if eig_q[0] < -1e-10 * max(1.0, float(np.max(np.abs(eig_q)))):
+        raise ControlError(f"Q must be positive semidefinite (smallest eigenvalue {eig_q[0]:.3g})")
+    try:
+        np.linalg.cholesky(Ra)
+    except np.linalg.LinAlgError:
+        raise ControlError("R must be positive definite") from None
+    return Qa, Ra
+
+
+def _weights(Q: Any, R: Any, p: int, n: int, check: bool) -> tuple[np.ndarray, np.ndarray]:
+    if check:
+        return validate_weights(Q, R, p, n)
+    return np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
+
+
+def _solve_spd(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve ``S X = rhs`` for the symmetric positive definite ``S = R + Gᵀ Q G``."""
+    S = 0.5 * (S + S.T)
+    try:
+        X = np.linalg.solve(S, rhs)
+    except np.linalg.LinAlgError:
+        raise ControlError("R + Gᵀ Q G is singular (check R)") from None
+    if not np.isfinite(X).all():
+        raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
+    return X
+
+
+# ---------------------------------------------------------------------------------- public API
+def one_step_gain(
+    F: Any, G: Any, Q: Any, R: Any, *, check_weights: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gains of the one-step optimal control (Eq. 35, corrected).
+
+    With ``S = R + Gᵀ Q G``::
+
+        K = S⁻¹ Gᵀ Q F      (n, p)
+        L = S⁻¹ Gᵀ Q        (n, p)
+
+    so that the exact minimiser of Eq. 34 is ``u* = -(K x + L w)``. The printed Eq. 35 is
+    ``u = -K (x + w)`` (``L`` replaced by ``K``). ``S`` is factorised once for both
+    (``numpy.linalg.solve`` with the stacked right-hand side ``Gᵀ Q [F I]``).
+
+    Parameters
+    ----------
+    F : array_like, shape (p, p)
+        F̂ of Eq. 16.
+    G : array_like, shape (p, n)
+        Ĝ of Eq. 16.
+    Q : array_like, shape (p, p)
+        Symmetric positive semidefinite state weight of Eq. 34.
+    R : array_like, shape (n, n)
+        Symmetric positive definite input weight of Eq. 34.
+    check_weights : bool, keyword-only
+        Validate ``Q`` and ``R`` (default). Pass False in a hot loop only after checking them
+        once with :func:`validate_weights`.
+
+    Returns
+    -------
+    K : numpy.ndarray, shape (n, p)
+    L : numpy.ndarray, shape (n, p)
+
+    Raises
+    ------
+    ControlError
+        On wrong shapes, non-finite entries, ``Q`` not symmetric PSD, ``R`` not symmetric
+        positive definite, or ``R + Gᵀ Q G`` numerically singular.
+    """
+    Fa, Ga, p, n = _model(F, G)
+    Qa, Ra = _weights(Q, R, p, n, check_weights)
+    GtQ = Ga.T @ Qa
+    rhs = np.empty((n, 2 * p))
+    rhs[:, :p] = GtQ @ Fa
+    rhs[:, p:] = GtQ
+    X = _solve_spd(Ra + GtQ @ Ga, rhs)
+    return X[:, :p].copy(), X[:, p:].copy()
+
+
+def one_step_control(
+    F: Any,
+    G: Any,
+    w: Any,
+    Q: Any,
+    R: Any,
+    x: Any,
+    form: Form = "exact",
+    *,
+    check_weights: bool = True,
+) -> np.ndarray:
+    """One-step optimal perturbation torque ``u*(k)`` (Eq. 35).
+
+    ``form="exact"`` (default) returns the minimiser of Eq. 34 subject to Eq. 16::
+
+        u* = -(R + Gᵀ Q G)⁻¹ Gᵀ Q (F x + w)
+
+    ``form="printed"`` returns Eq. 35 as printed, ``-(R + Gᵀ Q G)⁻¹ Gᵀ Q F (x + w)``; it
+    differs from the exact form when ``F ≠ I`` and ``w ≠ 0``.
+
+    Parameters
+    ----------
+    F : array_like, shape (p, p)
+    G : array_like, shape (p, n)
+    w : array_like, shape (p,)
+        F̂, Ĝ, ŵ of Eq. 16 (e.g. :attr:`apc_feedback.rls.Rls.F` etc.).
+    Q : array_like, shape (p, p)
+        Symmetric positive semidefinite.
+    R : array_like, shape (n, n)
+        Symmetric positive definite.
+    x : array_like, shape (p,)
+        Current perturbation state δx(k) = x(k) - x_n(k).
+    form : {"exact", "printed"}
+    check_weights : bool, keyword-only
+        See :func:`one_step_gain`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        δu(k), in the units of ``u`` in the model (N·m for joint torques).
+
+    Raises
+    ------
+    ControlError
+        As :func:`one_step_gain`; also on a bad ``w``, ``x`` or ``form``.
+    """
+    if form not in _FORMS:
+        raise ControlError(f"form must be one of {', '.join(_FORMS)}, got {form!r}")
+    Fa, Ga, p, n = _model(F, G)
+    wa = _array("w", w, (p,))
+    xa = _array("x", x, (p,))
+    Qa, Ra = _weights(Q, R, p, n, check_weights)
+    y = Fa @ xa + wa if form == "exact" else Fa @ (xa + wa)
+    GtQ = Ga.T @ Qa
+    return -_solve_spd(Ra + GtQ @ Ga, GtQ @ y)
+
+
+def closed_loop_eigenvalues(F: Any, G: Any, K: Any) -> np.ndarray:
+    """Eigenvalues of ``F - G K``, the closed loop of Eq. 16 under ``u = -K x``.
+
+    A diagnostic, like the ``E`` returned by python-control's ``dlqr``: the one-step controller
+    alone does not guarantee ``|λ| < 1``.
+
+    Parameters
+    ----------
+    F : array_like, shape (p, p)
+    G : array_like, shape (p, n)
+    K : array_like, shape (n, p)
+
+    Returns
+    -------
+    numpy.ndarray, shape (p,), complex
+
+    Raises
+    ------
+    ControlError
+        On wrong shapes or non-finite entries.
+    """
+    Fa, Ga, p, n = _model(F, G)
+    Ka = _array("K", K, (n, p))
+    return np.linalg.eigvals(Fa - Ga @ Ka).astype(complex)
+
+
+def one_step_cost(F: Any, G: Any, w: Any, Q: Any, R: Any, x: Any, u: Any) -> float:
+    """The one-step cost of Eq. 34.
+
+    ``J = ½ [x⁺ᵀ Q x⁺ + uᵀ R u]`` with ``x⁺ = F x + G u + w`` (Eq. 16).
+
+    Parameters
+    ----------
+    F : array_like, shape (p, p)
+    G : array_like, shape (p, n)
+    w : array_like, shape (p,)
+    Q : array_like, shape (p, p)
+    R : array_like, shape (n, n)
+    x : array_like, shape (p,)
+    u : array_like, shape (n,)
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ControlError
+        On wrong shapes, non-finite entries or invalid weights.
+    """
+    Fa, Ga, p, n = _model(F, G)
+    wa = _array("w", w, (p,))
+    xa = _array("x", x, (p,))
+    ua = _array("u", u, (n,))
+    Qa, Ra = validate_weights(Q, R, p, n)
+    x_next = Fa @ xa + Ga @ ua + wa
+    return 0.5 * float(x_next @ Qa @ x_next + ua @ Ra @ ua)

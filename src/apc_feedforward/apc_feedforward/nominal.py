@@ -1,0 +1,110 @@
+"""Nominal torques by recursive Newton-Euler (Eqs. 2-8) along a planned trajectory.
+
+The feedforward component of the paper: given the set point ``(q_d, qd_d, qdd_d)(kT)`` it
+computes ``u_n(k) = RNEA(q_d, qd_d, qdd_d)`` on the *controller's* model (which has the
+inertia error and knows no payload). Pinocchio's ``rnea`` is the Luh-Walker-Paul recursion of
+Eqs. 2-8 in spatial-algebra form: a forward pass for link velocities and accelerations
+(Eqs. 2-5) and a backward pass for forces, moments and joint torques (Eqs. 6-8).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from apc_feedforward.trajectory import Trajectory
+
+
+class FeedforwardError(ValueError):
+    """Bad feedforward input; the message names the argument."""
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """One sample of the plan and its nominal torque.
+
+    Attributes
+    ----------
+    k : int
+        Sample index; the sample time is ``k * period``.
+    t : float
+        Time since the start of the current motion (s).
+    q, qd, qdd : (n,) ndarray
+        Planned position (rad), velocity (rad/s), acceleration (rad/s^2).
+    u_n : (n,) ndarray
+        Nominal torque (N m), Eqs. 2-8.
+    """
+
+    k: int
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    u_n: np.ndarray
+
+
+def nominal_torque(
+    model: pin.Model, data: pin.Data, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+) -> np.ndarray:
+    """``u_n = D(q) qdd + h(q, qd) + c(q)`` by recursive Newton-Euler (Eqs. 2-8), shape (n,)."""
+    tau = pin.rnea(model, data, q, qd, qdd)
+    if not np.all(np.isfinite(tau)):
+        raise FeedforwardError("nominal torque is not finite (check the set point)")
+    return np.array(tau, dtype=float)
+
+
+class Feedforward:
+    """Samples a trajectory at ``k * period`` and turns each set point into a nominal torque.
+
+    The trajectory starts at sample ``start_k``; before it the first point is held, after it
+    the last (the trajectory's own hold semantics). Time is passed in as a sample index, never
+    read from a clock.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        The controller's model.
+    trajectory : Trajectory
+    period : float
+        Sampling period T (s).
+    start_k : int
+        Sample index at which the trajectory's t = 0 falls.
+    """
+
+    def __init__(
+        self, model: pin.Model, trajectory: Trajectory, period: float, start_k: int = 0
+    ) -> None:
+        if not period > 0.0:
+            raise FeedforwardError(f"period must be > 0 s, got {period}")
+        if trajectory.n_joints != model.nv:
+            raise FeedforwardError(
+                f"trajectory has {trajectory.n_joints} joints, model has {model.nv}"
+            )
+        self.model = model
+        self._data = model.createData()
+        self.period = float(period)
+        self.trajectory = trajectory
+        self.start_k = int(start_k)
+
+    def set_trajectory(self, trajectory: Trajectory, start_k: int) -> None:
+        """Replace the plan; it starts at sample ``start_k``."""
+        if trajectory.n_joints != self.model.nv:
+            raise FeedforwardError(
+                f"trajectory has {trajectory.n_joints} joints, model has {self.model.nv}"
+            )
+        self.trajectory = trajectory
+        self.start_k = int(start_k)
+
+    def end_k(self) -> int:
+        """First sample index at or after the end of the current motion."""
+        steps = int(np.ceil(self.trajectory.duration / self.period - 1e-9))
+        return self.start_k + steps
+
+    def sample(self, k: int) -> Setpoint:
+        """Set point and nominal torque at sample ``k`` (time ``k * period``)."""
+        t = (k - self.start_k) * self.period
+        q, qd, qdd = self.trajectory.sample(t)
+        u_n = nominal_torque(self.model, self._data, q, qd, qdd)
+        return Setpoint(k=k, t=t, q=q, qd=qd, qdd=qdd, u_n=u_n)

@@ -1,0 +1,751 @@
+"""Joint-space trajectory planning for the feedforward path of apc.
+
+The feedforward component of the adaptive perturbation controller needs the desired joint
+position, velocity and acceleration ``(q_d, q̇_d, q̈_d)`` at every sampling instant ``k*T``; the
+nominal torques ``u_n`` are then computed from them by Newton-Euler.  This module plans those
+set points.  It is pure numpy: no ROS types, no clock, no Pinocchio.  Time is always passed in,
+as in ros2_controllers' ``Trajectory::sample``.
+
+Three planners are provided, all piecewise polynomials in time:
+
+* :class:`FourThreeFour` -- the 4-3-4 joint-interpolated trajectory (Paul; Fu, Gonzalez & Lee,
+  *Robotics: Control, Sensing, Vision and Intelligence*, ch. 4).  This is the trajectory of the
+  paper's "COMPUTER SIMULATION: A THREE-JOINT PUMA ROBOT ARM" section: ``q = (0, 45, 45) deg`` to
+  ``(90, -45, 135) deg`` in 1 s, passing ``(45, 0, 90) deg`` at 0.5 s.  (Which angles and times
+  are used is decided by the configuration layer, not here.)
+* :class:`Quintic` -- a quintic point-to-point move with given boundary velocities and
+  accelerations.
+* :class:`Waypoints` -- quintic segments through the points of a
+  ``trajectory_msgs/JointTrajectory`` goal.
+
+Units are SI throughout: s, rad, rad/s, rad/s².  Every sampler holds the start point before
+``t = 0`` and the final point from ``t = duration`` on, with zero velocity and acceleration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "FourThreeFour",
+    "PiecewisePolynomial",
+    "Quintic",
+    "Trajectory",
+    "TrajectoryError",
+    "Waypoints",
+]
+
+FloatArray = NDArray[np.float64]
+
+# Highest polynomial degree used by any planner here; every segment is stored padded to it so
+# that all segments can be evaluated in one vectorised Horner pass.
+_MAX_DEGREE = 5
+
+
+class TrajectoryError(ValueError):
+    """A trajectory was given a bad argument; the message names the argument."""
+
+
+# --------------------------------------------------------------------------------------------
+# Argument checking
+# --------------------------------------------------------------------------------------------
+
+
+def _as_float_array(name: str, value: ArrayLike) -> FloatArray:
+    try:
+        arr = np.array(value, dtype=np.float64)  # copy: callers must not alias our state
+    except (TypeError, ValueError) as exc:
+        raise TrajectoryError(f"{name}: not convertible to a float array ({exc})") from None
+    if not np.all(np.isfinite(arr)):
+        raise TrajectoryError(f"{name}: must be finite, got {value!r}")
+    return arr
+
+
+def _as_vector(name: str, value: ArrayLike, n: int | None = None) -> FloatArray:
+    """``value`` as a finite float vector of shape ``(n,)`` (any length if ``n`` is None)."""
+    arr = _as_float_array(name, value)
+    if arr.ndim != 1:
+        raise TrajectoryError(f"{name}: must be a 1-D array, got shape {arr.shape}")
+    if n is not None and arr.shape != (n,):
+        raise TrajectoryError(f"{name}: must have shape ({n},), got {arr.shape}")
+    if arr.size == 0:
+        raise TrajectoryError(f"{name}: must not be empty")
+    return arr
+
+
+def _as_broadcast_vector(name: str, value: ArrayLike, n: int) -> FloatArray:
+    """A scalar or an ``(n,)`` array, returned as a finite ``(n,)`` float vector."""
+    arr = _as_float_array(name, value)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise TrajectoryError(f"{name}: must be a scalar or have shape ({n},), got {arr.shape}")
+    return arr
+
+
+def _as_matrix(name: str, value: ArrayLike, shape: tuple[int, int]) -> FloatArray:
+    arr = _as_float_array(name, value)
+    if arr.shape != shape:
+        raise TrajectoryError(f"{name}: must have shape {shape}, got {arr.shape}")
+    return arr
+
+
+def _as_positive(name: str, value: float) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise TrajectoryError(f"{name}: must be a number, got {value!r}") from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise TrajectoryError(f"{name}: must be finite and > 0, got {value!r}")
+    return x
+
+
+def _readonly(arr: FloatArray) -> FloatArray:
+    arr.setflags(write=False)
+    return arr
+
+
+# --------------------------------------------------------------------------------------------
+# Base classes
+# --------------------------------------------------------------------------------------------
+
+
+class Trajectory:
+    """Interface of a joint-space trajectory sampled at times it is told.
+
+    Subclasses implement :meth:`sample_many`; :meth:`sample` and :meth:`sample_at_period` are
+    built on it, so all three give bit-identical values at the same time.
+
+    Attributes
+    ----------
+    n_joints : int
+        Number of joints ``n``.
+    duration : float
+        Time at which the final point is reached, s.
+    """
+
+    n_joints: int
+    duration: float
+
+    def sample_many(self, t: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Sample at the times ``t``.
+
+        Parameters
+        ----------
+        t : array_like, shape (m,)
+            Times from the start of the trajectory, s.  Need not be sorted.
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (m, n)
+            Position (rad), velocity (rad/s) and acceleration (rad/s²).
+
+        Raises
+        ------
+        TrajectoryError
+            If ``t`` is not 1-D or not finite.
+        """
+        raise NotImplementedError
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Sample at one time ``t`` (s).
+
+        Edge cases, as JTC's ``Trajectory::sample`` documents them:
+
+        * ``t < 0``: the start point with zero velocity and acceleration (hold the start);
+        * ``t >= duration``: the final point with zero velocity and acceleration (hold the
+          last set point);
+        * ``t`` exactly on an interior knot: the segment that starts there (the trajectory is
+          continuous there, so the other side agrees to rounding).
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (n,)
+            rad, rad/s, rad/s².
+
+        Raises
+        ------
+        TrajectoryError
+            If ``t`` is not a finite number.
+        """
+        try:
+            t_arr = np.array([float(t)])
+        except (TypeError, ValueError):
+            raise TrajectoryError(f"t: must be a number, got {t!r}") from None
+        q, qd, qdd = self.sample_many(t_arr)
+        return q[0], qd[0], qdd[0]
+
+    def sample_at_period(
+        self, period: float, n_samples: int | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Sample at ``t_k = k * period`` for ``k = 0 .. n_samples - 1``.
+
+        ``t_k`` is computed as the product ``k * period`` (not by accumulating ``period``), so
+        it equals the time the controller is told at step ``k`` exactly.
+
+        Parameters
+        ----------
+        period : float
+            Sampling period T, s, > 0.
+        n_samples : int, optional
+            Number of samples ``m >= 1``.  Default ``floor(duration / period + 1e-9) + 1``,
+            i.e. up to and including the end when ``duration`` is a multiple of ``period``
+            (the 1e-9 absorbs rounding such as ``1.0 / 0.01 = 99.999...``).  Samples past the
+            end hold the final point.
+
+        Returns
+        -------
+        t : ndarray, shape (m,)
+            Sample times, s.
+        q, qd, qdd : ndarray, shape (m, n)
+            rad, rad/s, rad/s².
+
+        Raises
+        ------
+        TrajectoryError
+            If ``period`` is not finite and positive or ``n_samples`` is not an int >= 1.
+        """
+        period = _as_positive("period", period)
+        if n_samples is None:
+            n_samples = math.floor(self.duration / period + 1e-9) + 1
+        elif isinstance(n_samples, bool) or not isinstance(n_samples, int | np.integer):
+            raise TrajectoryError(f"n_samples: must be an int, got {n_samples!r}")
+        elif n_samples < 1:
+            raise TrajectoryError(f"n_samples: must be >= 1, got {n_samples}")
+        t = np.arange(int(n_samples), dtype=np.float64) * period
+        q, qd, qdd = self.sample_many(t)
+        return t, q, qd, qdd
+
+
+class PiecewisePolynomial(Trajectory):
+    """Per-joint piecewise polynomial of degree <= 5 in local segment time.
+
+    Segment ``i`` covers ``knot_times[i] <= t < knot_times[i + 1]`` and there
+
+    ``q(t) = sum_k coefficients[i, k] * (t - knot_times[i])**k``.
+
+    The planners below are subclasses; this class can also be used directly.
+
+    Parameters
+    ----------
+    knot_times : array_like, shape (s + 1,)
+        Strictly increasing segment boundaries, s; the first must be 0.
+    coefficients : array_like, shape (s, d + 1, n)
+        Ascending-power coefficients of each segment in local time (s), ``d <= 5``.
+        Units: rad / s**k for power k.
+    q_start, q_end : array_like, shape (n,), optional
+        Held before 0 and from ``duration`` on.  Default: the polynomials evaluated at the
+        ends.  Planners pass their exact boundary positions so the hold is exact.
+
+    Raises
+    ------
+    TrajectoryError
+        On shape mismatch, non-finite values or bad knot times.
+    """
+
+    def __init__(
+        self,
+        knot_times: ArrayLike,
+        coefficients: ArrayLike,
+        q_start: ArrayLike | None = None,
+        q_end: ArrayLike | None = None,
+    ) -> None:
+        knots = _as_vector("knot_times", knot_times)
+        if knots.size < 2:
+            raise TrajectoryError("knot_times: need at least two knots (one segment)")
+        if knots[0] != 0.0:
+            raise TrajectoryError(f"knot_times: must start at 0, got {knots[0]}")
+        if np.any(np.diff(knots) <= 0.0):
+            raise TrajectoryError(f"knot_times: must be strictly increasing, got {knots}")
+        coeffs = _as_float_array("coefficients", coefficients)
+        n_seg = knots.size - 1
+        if coeffs.ndim != 3 or coeffs.shape[0] != n_seg or coeffs.shape[2] == 0:
+            raise TrajectoryError(
+                f"coefficients: must have shape ({n_seg}, d + 1, n), got {coeffs.shape}"
+            )
+        if coeffs.shape[1] > _MAX_DEGREE + 1:
+            raise TrajectoryError(f"coefficients: degree must be <= {_MAX_DEGREE}")
+        n = coeffs.shape[2]
+        padded = np.zeros((n_seg, _MAX_DEGREE + 1, n))
+        padded[:, : coeffs.shape[1], :] = coeffs
+
+        self.n_joints = int(n)
+        self.duration = float(knots[-1])
+        self._knots = _readonly(knots)
+        self._c = _readonly(padded)
+        # Derivative coefficients, precomputed once so sampling is three Horner passes.
+        powers = np.arange(_MAX_DEGREE + 1, dtype=np.float64)[:, None]
+        self._dc = _readonly((padded * powers)[:, 1:, :].copy())
+        self._ddc = _readonly((padded * powers * (powers - 1.0))[:, 2:, :].copy())
+
+        if q_start is None:
+            q_start = padded[0, 0, :]
+        if q_end is None:
+            q_end = self.evaluate_segment(n_seg - 1, self.duration)[0]
+        self._q_start = _readonly(_as_vector("q_start", q_start, n))
+        self._q_end = _readonly(_as_vector("q_end", q_end, n))
+
+    @property
+    def knot_times(self) -> FloatArray:
+        """Segment boundaries, shape (s + 1,), s; ``knot_times[0] = 0``, last = ``duration``."""
+        return self._knots
+
+    @property
+    def coefficients(self) -> FloatArray:
+        """Ascending-power local-time coefficients, shape (s, 6, n), padded with zeros."""
+        return self._c
+
+    @property
+    def n_segments(self) -> int:
+        """Number of polynomial segments ``s``."""
+        return int(self._c.shape[0])
+
+    def evaluate_segment(self, segment: int, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Evaluate one segment's polynomial at absolute time ``t`` (s), without clamping.
+
+        Unlike :meth:`sample` this extrapolates outside the segment; it is meant for checking
+        continuity at a knot from both sides.
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (n,)
+            rad, rad/s, rad/s².
+        """
+        if not 0 <= segment < self.n_segments:
+            raise TrajectoryError(f"segment: must be in [0, {self.n_segments}), got {segment}")
+        tau = float(t) - self._knots[segment]
+        return (
+            _horner(self._c[segment], tau),
+            _horner(self._dc[segment], tau),
+            _horner(self._ddc[segment], tau),
+        )
+
+    def sample_many(self, t: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Sample at the times ``t``; see :meth:`Trajectory.sample` for the edge cases.
+
+        Parameters
+        ----------
+        t : array_like, shape (m,)
+            Times, s.
+
+        Returns
+        -------
+        q, qd, qdd : ndarray, shape (m, n)
+            rad, rad/s, rad/s².
+
+        Raises
+        ------
+        TrajectoryError
+            If ``t`` is not 1-D or not finite.
+        """
+        t_arr = _as_float_array("t", t)
+        if t_arr.ndim != 1:
+            raise TrajectoryError(f"t: must be a 1-D array, got shape {t_arr.shape}")
+        # side="right": a time exactly on an interior knot belongs to the segment starting there.
+        seg = np.searchsorted(self._knots[1:-1], t_arr, side="right")
+        tau = (t_arr - self._knots[seg])[:, None]
+        q = _horner_batched(self._c[seg], tau)
+        qd = _horner_batched(self._dc[seg], tau)
+        qdd = _horner_batched(self._ddc[seg], tau)
+
+        before = t_arr < 0.0
+        after = t_arr >= self.duration
+        # Hold: outside [0, duration) the set point is the end point at rest, never an
+        # extrapolated polynomial (which would run away quickly for degree 4-5).
+        q[before] = self._q_start
+        q[after] = self._q_end
+        hold = before | after
+        qd[hold] = 0.0
+        qdd[hold] = 0.0
+        return q, qd, qdd
+
+
+def _horner(c: FloatArray, tau: float) -> FloatArray:
+    """``sum_k c[k] * tau**k`` for ``c`` of shape (d + 1, n)."""
+    out = c[-1].copy()
+    for k in range(c.shape[0] - 2, -1, -1):
+        out = out * tau + c[k]
+    return out
+
+
+def _horner_batched(c: FloatArray, tau: FloatArray) -> FloatArray:
+    """Row-wise Horner: ``c`` of shape (m, d + 1, n), ``tau`` of shape (m, 1) -> (m, n).
+
+    Same operation order as :func:`_horner`, so one time gives the same bits either way.
+    """
+    out = c[:, -1, :].copy()
+    for k in range(c.shape[1] - 2, -1, -1):
+        out = out * tau + c[:, k, :]
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Quintic building block
+# --------------------------------------------------------------------------------------------
+
+
+def _quintic_coefficients(
+    duration: float,
+    q0: FloatArray,
+    qd0: FloatArray,
+    qdd0: FloatArray,
+    qf: FloatArray,
+    qdf: FloatArray,
+    qddf: FloatArray,
+) -> FloatArray:
+    """Coefficients, shape (6, n), of the quintic meeting the six boundary conditions.
+
+    Solved in normalised time ``u = tau / duration`` (closed form of the 6x6 Hermite system),
+    then rescaled to seconds: ``c_k = a_k / duration**k``.  Working in ``u`` keeps the
+    arithmetic well scaled for both short and long segments.
+    """
+    T = duration
+    h = qf - q0
+    v0, v1 = qd0 * T, qdf * T
+    a0, a1 = qdd0 * T * T, qddf * T * T
+    a = np.stack(
+        [
+            q0,
+            v0,
+            0.5 * a0,
+            10.0 * h - 6.0 * v0 - 4.0 * v1 - 0.5 * (3.0 * a0 - a1),
+            -15.0 * h + 8.0 * v0 + 7.0 * v1 + 0.5 * (3.0 * a0 - 2.0 * a1),
+            6.0 * h - 3.0 * v0 - 3.0 * v1 - 0.5 * (a0 - a1),
+        ]
+    )
+    scale = T ** np.arange(6, dtype=np.float64)
+    return a / scale[:, None]
+
+
+# --------------------------------------------------------------------------------------------
+# Planners
+# --------------------------------------------------------------------------------------------
+
+
+def _basis_row(degree: int, u: float, derivative: int) -> FloatArray:
+    """Row ``[d^j/du^j u**k for k = 0..degree]`` evaluated at ``u``."""
+    row = np.zeros(degree + 1)
+    for k in range(derivative, degree + 1):
+        factor = math.prod(range(k - derivative + 1, k + 1))  # k! / (k - j)!
+        row[k] = factor * u ** (k - derivative)
+    return row
+
+
+class FourThreeFour(PiecewisePolynomial):
+    """4-3-4 joint-interpolated trajectory (the paper's planned trajectory).
+
+    Per joint: a quartic from the initial point ``q0`` to the lift-off point, a cubic from
+    lift-off to set-down, and a quartic from set-down to the final point ``qf``.  The 14
+    coefficients per joint are fixed by 14 conditions (Fu, Gonzalez & Lee, ch. 4):
+
+    * ``q(0) = q0``, ``q̇(0) = 0``, ``q̈(0) = 0``;
+    * at lift-off ``t1``: both adjacent segments equal the lift-off position, and velocity and
+      acceleration are continuous (4 conditions);
+    * at set-down ``t1 + t2``: likewise (4 conditions);
+    * ``q(t_f) = qf``, ``q̇(t_f) = 0``, ``q̈(t_f) = 0``.
+
+    The 14x14 matrix depends only on the segment times, so one system with ``n`` right-hand
+    sides is solved for all joints (``numpy.linalg.solve``; no inverse).  Each segment is
+    solved in normalised time and its coefficients rescaled to seconds.
+
+    With the default symmetric segment times and 10 % / 90 % lift-off / set-down, the
+    trajectory is point-symmetric about its midpoint: ``q(t_f / 2) = (q0 + qf) / 2``.  For the
+    paper's move, ``(0, 45, 45) -> (90, -45, 135) deg`` in 1 s, that is ``(45, 0, 90) deg`` at
+    0.5 s, where the paper says links 2 and 3 are fully stretched.
+
+    Parameters
+    ----------
+    q0, qf : array_like, shape (n,)
+        Initial and final joint positions, rad.
+    segment_times : sequence of 3 floats, default (0.2, 0.6, 0.2)
+        Durations ``(t1, t2, t3)`` of the lift-off, travel and set-down segments, s, each > 0.
+    lift_off, set_down : float or array_like of shape (n,), default 0.1 and 0.9
+        A float is a fraction of each joint's travel (position ``q0 + f * (qf - q0)``) and must
+        lie in (0, 1); an array is the explicit joint positions, rad.  When both are fractions,
+        ``lift_off < set_down`` is required.
+
+    Attributes
+    ----------
+    q0, qf, lift_off_position, set_down_position : ndarray, shape (n,)
+        Read-only, rad.
+
+    Raises
+    ------
+    TrajectoryError
+        If a segment time is not finite and positive, ``q0``/``qf`` are not finite or differ in
+        shape, or ``lift_off``/``set_down`` are out of range or of the wrong shape.
+    """
+
+    def __init__(
+        self,
+        q0: ArrayLike,
+        qf: ArrayLike,
+        segment_times: Sequence[float] = (0.2, 0.6, 0.2),
+        lift_off: float | ArrayLike = 0.1,
+        set_down: float | ArrayLike = 0.9,
+    ) -> None:
+        q0_v = _as_vector("q0", q0)
+        n = q0_v.size
+        qf_v = _as_vector("qf", qf, n)
+        times = _as_float_array("segment_times", segment_times)
+        if times.shape != (3,):
+            raise TrajectoryError(f"segment_times: must have 3 entries, got shape {times.shape}")
+        for i, ti in enumerate(times):
+            _as_positive(f"segment_times[{i}]", ti)
+        q_lift = self._via_point("lift_off", lift_off, q0_v, qf_v)
+        q_set = self._via_point("set_down", set_down, q0_v, qf_v)
+        if _is_fraction(lift_off) and _is_fraction(set_down) and not lift_off < set_down:
+            raise TrajectoryError(
+                f"lift_off: fraction must be < set_down, got {lift_off} >= {set_down}"
+            )
+
+        t1, t2, t3 = (float(x) for x in times)
+        coeffs = self._solve(t1, t2, t3, q0_v, q_lift, q_set, qf_v)
+        knots = np.array([0.0, t1, t1 + t2, t1 + t2 + t3])
+        super().__init__(knots, coeffs, q_start=q0_v, q_end=qf_v)
+        self.q0 = _readonly(q0_v)
+        self.qf = _readonly(qf_v)
+        self.lift_off_position = _readonly(q_lift)
+        self.set_down_position = _readonly(q_set)
+
+    @staticmethod
+    def _via_point(
+        name: str, value: float | ArrayLike, q0: FloatArray, qf: FloatArray
+    ) -> FloatArray:
+        if _is_fraction(value):
+            f = float(value)  # type: ignore[arg-type]
+            if not (math.isfinite(f) and 0.0 < f < 1.0):
+                raise TrajectoryError(f"{name}: fraction of travel must be in (0, 1), got {f}")
+            return q0 + f * (qf - q0)
+        return _as_vector(name, value, q0.size)
+
+    @staticmethod
+    def _solve(
+        t1: float,
+        t2: float,
+        t3: float,
+        q0: FloatArray,
+        q_lift: FloatArray,
+        q_set: FloatArray,
+        qf: FloatArray,
+    ) -> FloatArray:
+        """Coefficients, shape (3, 5, n), in local time (s); the cubic's 5th entry is 0."""
+        # Unknowns x = [a0..a4 | b0..b3 | c0..c4] in normalised time u = tau / t_i of each
+        # segment.  A time derivative of order j is (d^j/du^j) / t_i**j; the continuity rows
+        # are multiplied through by t1**j (or t2**j) so the matrix depends only on time ratios.
+        A = np.zeros((14, 14))
+        B = np.zeros((14, q0.size))
+        s1, s2, s3 = slice(0, 5), slice(5, 9), slice(9, 14)
+        r12, r23 = t1 / t2, t2 / t3
+        rows = [
+            # start at rest
+            ((s1, _basis_row(4, 0.0, 0)), None, q0),
+            ((s1, _basis_row(4, 0.0, 1)), None, 0.0),
+            ((s1, _basis_row(4, 0.0, 2)), None, 0.0),
+            # lift-off knot
+            ((s1, _basis_row(4, 1.0, 0)), None, q_lift),
+            ((s2, _basis_row(3, 0.0, 0)), None, q_lift),
+            ((s1, _basis_row(4, 1.0, 1)), (s2, -r12 * _basis_row(3, 0.0, 1)), 0.0),
+            ((s1, _basis_row(4, 1.0, 2)), (s2, -(r12**2) * _basis_row(3, 0.0, 2)), 0.0),
+            # set-down knot
+            ((s2, _basis_row(3, 1.0, 0)), None, q_set),
+            ((s3, _basis_row(4, 0.0, 0)), None, q_set),
+            ((s2, _basis_row(3, 1.0, 1)), (s3, -r23 * _basis_row(4, 0.0, 1)), 0.0),
+            ((s2, _basis_row(3, 1.0, 2)), (s3, -(r23**2) * _basis_row(4, 0.0, 2)), 0.0),
+            # end at rest
+            ((s3, _basis_row(4, 1.0, 0)), None, qf),
+            ((s3, _basis_row(4, 1.0, 1)), None, 0.0),
+            ((s3, _basis_row(4, 1.0, 2)), None, 0.0),
+        ]
+        for i, (first, second, rhs) in enumerate(rows):
+            A[i, first[0]] = first[1]
+            if second is not None:
+                A[i, second[0]] = second[1]
+            B[i] = rhs
+        x = np.linalg.solve(A, B)  # (14, n)
+
+        coeffs = np.zeros((3, 5, q0.size))
+        for seg, (sl, ti) in enumerate(((s1, t1), (s2, t2), (s3, t3))):
+            a = x[sl]
+            coeffs[seg, : a.shape[0]] = a / (ti ** np.arange(a.shape[0]))[:, None]
+        return coeffs
+
+
+def _is_fraction(value: object) -> bool:
+    """True for a plain real scalar (a fraction of travel), False for an array of positions."""
+    return np.ndim(value) == 0 and not isinstance(value, bool | str)
+
+
+class Quintic(PiecewisePolynomial):
+    """Quintic point-to-point move, per joint, with given boundary velocity and acceleration.
+
+    ``q(tau) = sum_{k=0}^{5} c_k tau**k`` meets ``q, q̇, q̈`` at ``tau = 0`` and
+    ``tau = duration``.  Note that sampling holds the end points at rest outside
+    ``[0, duration)``, so non-zero boundary velocity or acceleration shows as a step there.
+
+    Parameters
+    ----------
+    q0, qf : array_like, shape (n,)
+        Start and end positions, rad.
+    duration : float
+        Move time, s, > 0.
+    qd0, qdf : float or array_like of shape (n,), default 0
+        Start and end velocities, rad/s.
+    qdd0, qddf : float or array_like of shape (n,), default 0
+        Start and end accelerations, rad/s².
+
+    Raises
+    ------
+    TrajectoryError
+        On non-finite values, shape mismatch or ``duration <= 0``.
+    """
+
+    def __init__(
+        self,
+        q0: ArrayLike,
+        qf: ArrayLike,
+        duration: float,
+        qd0: float | ArrayLike = 0.0,
+        qdd0: float | ArrayLike = 0.0,
+        qdf: float | ArrayLike = 0.0,
+        qddf: float | ArrayLike = 0.0,
+    ) -> None:
+        q0_v = _as_vector("q0", q0)
+        n = q0_v.size
+        qf_v = _as_vector("qf", qf, n)
+        T = _as_positive("duration", duration)
+        c = _quintic_coefficients(
+            T,
+            q0_v,
+            _as_broadcast_vector("qd0", qd0, n),
+            _as_broadcast_vector("qdd0", qdd0, n),
+            qf_v,
+            _as_broadcast_vector("qdf", qdf, n),
+            _as_broadcast_vector("qddf", qddf, n),
+        )
+        super().__init__(np.array([0.0, T]), c[None], q_start=q0_v, q_end=qf_v)
+        self.q0 = _readonly(q0_v)
+        self.qf = _readonly(qf_v)
+
+
+class Waypoints(PiecewisePolynomial):
+    """Quintic segments through the points of a ``JointTrajectory`` goal.
+
+    The robot starts at ``q_start`` at ``t = 0`` at rest (zero velocity and acceleration) and
+    passes waypoint ``j`` at ``times[j]``.  Between consecutive points a quintic meets position,
+    velocity and acceleration at both ends, so position and velocity are continuous
+    everywhere, and acceleration too because both neighbouring segments use the same
+    waypoint acceleration.
+
+    Velocity heuristic (when ``velocities`` is None).  With segment slopes
+    ``s_j = (p_j - p_{j-1}) / (t_j - t_{j-1})`` (``p_0 = q_start``, ``t_0 = 0``), the velocity at
+    an interior waypoint, per joint, is
+
+    * 0 if the two adjacent slopes differ in sign or either is 0 (the waypoint is a turning
+      point or the start/end of a dwell, so stopping there avoids overshoot);
+    * otherwise their mean ``(s_j + s_{j+1}) / 2``, limited in magnitude to
+      ``2 * min(|s_j|, |s_{j+1}|)``.
+
+    The last waypoint gets zero velocity.  The limit keeps every segment monotone: a quintic
+    with zero end accelerations whose end velocities lie in ``[0, 2 s]`` (same sign as its slope
+    ``s``) has no interior extremum, so joints never overshoot a waypoint (checked numerically
+    on a grid; with equal end velocities it fails between 2 s and 2.25 s).
+
+    Acceleration choice (when ``accelerations`` is None): zero at every waypoint, interior ones
+    included.  That is C2 by construction and keeps the monotonicity above; it is not the
+    smoothest possible choice (a spline would spread acceleration), but it is simple and local.
+
+    Parameters
+    ----------
+    q_start : array_like, shape (n,)
+        Position at ``t = 0``, rad (normally the measured state when the goal arrives).
+    times : array_like, shape (m,)
+        ``time_from_start`` of each waypoint, s; strictly increasing, first > 0.
+    positions : array_like, shape (m, n)
+        Waypoint positions, rad.
+    velocities : array_like, shape (m, n), optional
+        Waypoint velocities, rad/s.  Default: the heuristic above.
+    accelerations : array_like, shape (m, n), optional
+        Waypoint accelerations, rad/s².  Default: zero.
+    allow_nonzero_end_velocity : bool, default False
+        Like JTC's ``allow_nonzero_velocity_at_trajectory_end``: by default a given non-zero
+        final velocity is rejected, because the trajectory holds the final point at rest
+        afterwards and the velocity set point would step.
+
+    Attributes
+    ----------
+    knot_positions, knot_velocities, knot_accelerations : ndarray, shape (m + 1, n)
+        The boundary values actually used, row 0 being the start.  Read-only.
+
+    Raises
+    ------
+    TrajectoryError
+        If ``times`` is not strictly increasing with a positive first entry, shapes do not
+        match ``(m, n)``, a value is not finite, or the final velocity is non-zero (unless
+        allowed).
+    """
+
+    def __init__(
+        self,
+        q_start: ArrayLike,
+        times: ArrayLike,
+        positions: ArrayLike,
+        velocities: ArrayLike | None = None,
+        accelerations: ArrayLike | None = None,
+        *,
+        allow_nonzero_end_velocity: bool = False,
+    ) -> None:
+        q0 = _as_vector("q_start", q_start)
+        n = q0.size
+        t_wp = _as_vector("times", times)
+        m = t_wp.size
+        if t_wp[0] <= 0.0:
+            raise TrajectoryError(f"times: first time_from_start must be > 0, got {t_wp[0]}")
+        if np.any(np.diff(t_wp) <= 0.0):
+            raise TrajectoryError(f"times: must be strictly increasing, got {t_wp}")
+        p_wp = _as_matrix("positions", positions, (m, n))
+
+        knots = np.concatenate(([0.0], t_wp))
+        P = np.vstack((q0, p_wp))  # (m + 1, n)
+        dt = np.diff(knots)
+
+        if velocities is None:
+            V = self._heuristic_velocities(P, dt)
+        else:
+            V = np.vstack((np.zeros(n), _as_matrix("velocities", velocities, (m, n))))
+            if not allow_nonzero_end_velocity and np.any(V[-1] != 0.0):
+                raise TrajectoryError(
+                    f"velocities: final waypoint velocity must be 0, got {V[-1]} "
+                    "(pass allow_nonzero_end_velocity=True to accept it)"
+                )
+        if accelerations is None:
+            Acc = np.zeros((m + 1, n))
+        else:
+            Acc = np.vstack((np.zeros(n), _as_matrix("accelerations", accelerations, (m, n))))
+
+        coeffs = np.stack(
+            [
+                _quintic_coefficients(dt[j], P[j], V[j], Acc[j], P[j + 1], V[j + 1], Acc[j + 1])
+                for j in range(m)
+            ]
+        )
+        super().__init__(knots, coeffs, q_start=q0, q_end=P[-1])
+        self.knot_positions = _readonly(P)
+        self.knot_velocities = _readonly(V)
+        self.knot_accelerations = _readonly(Acc)
+
+    @staticmethod
+    def _heuristic_velocities(P: FloatArray, dt: FloatArray) -> FloatArray:
+        """Knot velocities (m + 1, n): 0 at both ends, limited mean of slopes inside."""
+        slopes = np.diff(P, axis=0) / dt[:, None]  # (m, n)
+        V = np.zeros_like(P)
+        left, right = slopes[:-1], slopes[1:]
+        same_sign = np.sign(left) * np.sign(right) > 0.0  # False on a sign change or a 0 slope
+        limit = 2.0 * np.minimum(np.abs(left), np.abs(right))
+        mean = 0.5 * (left + right)
+        V[1:-1] = np.where(same_sign, np.sign(mean) * np.minimum(np.abs(mean), limit), 0.0)
+        return V

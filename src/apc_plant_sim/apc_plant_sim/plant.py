@@ -1,0 +1,191 @@
+"""The simulated arm: Lagrange-Euler dynamics (Eq. 1) integrated by classical RK4.
+
+``D(q) q'' + h(q, q') + c(q) = tau`` with ``D`` from Pinocchio's CRBA and ``h + c`` from its
+nonlinear effects, so ``q'' = solve(D(q), tau - h - c)`` (Eq. 12 without forming ``D^-1``).
+The torque is held constant over each sampling period T (zero-order hold, the paper's
+piecewise-constant ``u(kT)`` of Eq. 16) and the state is integrated with T/h fixed RK4 steps of
+size h (the paper used Runge-Kutta-Gill, a fourth-order RK variant; classical RK4 has the same
+order and a fixed step makes runs bit-reproducible).
+
+Torques beyond the URDF's effort limits are clipped before they are applied; every period
+reports which joints saturated and the torque actually applied.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from apc_msgs_py.robot import Robot
+
+
+class PlantError(ValueError):
+    """Bad plant configuration or input; the message names the parameter."""
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Timing and limits of the simulated arm.
+
+    Attributes
+    ----------
+    period : float
+        Sampling period T (s): the torque is held for T, state is reported every T.
+    step : float
+        RK4 integration step h (s); T/h must be a whole number.
+    enforce_torque_limits : bool
+        Clip |tau_i| to the URDF effort limit of joint i.
+    """
+
+    period: float = 0.010
+    step: float = 0.0025
+    enforce_torque_limits: bool = True
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.period) and self.period > 0.0):
+            raise PlantError(f"period must be > 0 s, got {self.period}")
+        if not (np.isfinite(self.step) and self.step > 0.0):
+            raise PlantError(f"step must be > 0 s, got {self.step}")
+        ratio = self.period / self.step
+        if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+            raise PlantError(
+                f"step ({self.step} s) must divide period ({self.period} s) a whole number of times"
+            )
+
+    @property
+    def substeps(self) -> int:
+        return round(self.period / self.step)
+
+    @staticmethod
+    def from_dict(values: Mapping[str, Any]) -> PlantConfig:
+        """Build from a plain mapping (e.g. ROS parameters); unknown keys are rejected."""
+        known = {"period", "step", "enforce_torque_limits"}
+        unknown = set(values) - known
+        if unknown:
+            raise PlantError(f"unknown plant parameter(s): {sorted(unknown)}")
+        return PlantConfig(**dict(values))
+
+
+@dataclass(frozen=True)
+class PlantStep:
+    """What one sampling period did.
+
+    Attributes
+    ----------
+    q, qd : (n,) ndarray
+        State at the end of the period (rad, rad/s).
+    applied : (n,) ndarray
+        Torque held over the period after limiting (N m).
+    saturated : (n,) bool ndarray
+        Joints whose commanded torque exceeded the effort limit.
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    applied: np.ndarray
+    saturated: np.ndarray
+
+
+class Plant:
+    """A serial arm integrated with RK4 under a zero-order-hold torque.
+
+    Parameters
+    ----------
+    robot : Robot
+        The *true* arm (with payload); the controllers never see it.
+    config : PlantConfig
+    q0, qd0 : (n,) array_like
+        Initial state (rad, rad/s); qd0 defaults to zero.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        config: PlantConfig,
+        q0: np.ndarray,
+        qd0: np.ndarray | None = None,
+    ) -> None:
+        self.robot = robot
+        self.config = config
+        self._model = robot.model
+        self._data = robot.model.createData()
+        self._n = robot.n_joints
+        self._limit = robot.effort_limit.copy()
+        self.reset(q0, qd0)
+
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
+        """Put the arm at ``(q0, qd0)`` with time index 0."""
+        self.q = self._vector(q0, "q0")
+        self.qd = np.zeros(self._n) if qd0 is None else self._vector(qd0, "qd0")
+        self.k = 0
+
+    def _vector(self, value: Any, name: str) -> np.ndarray:
+        arr = np.array(value, dtype=float).reshape(-1)
+        if arr.shape != (self._n,):
+            raise PlantError(f"{name} must have shape ({self._n},), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise PlantError(f"{name} must be finite, got {arr.tolist()}")
+        return arr
+
+    def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Forward dynamics in Lagrange-Euler form, Eq. 1 / Eq. 12.
+
+        ``q'' = solve(D(q), tau - (h(q, q') + c(q)))``; ``D`` is symmetric positive definite,
+        so a Cholesky solve would do, but ``numpy.linalg.solve`` on an n x n matrix is as fast
+        in Python and equally exact here.
+        """
+        D = pin.crba(self._model, self._data, q)
+        # CRBA fills only the upper triangle.
+        D = np.triu(D) + np.triu(D, 1).T
+        bias = pin.nonLinearEffects(self._model, self._data, q, qd)
+        return np.linalg.solve(D, tau - bias)
+
+    def limit(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Clip a commanded torque to the effort limits; return (applied, saturated mask)."""
+        if not self.config.enforce_torque_limits:
+            return tau.copy(), np.zeros(self._n, dtype=bool)
+        saturated = np.abs(tau) > self._limit
+        return np.clip(tau, -self._limit, self._limit), saturated
+
+    def step(self, tau: np.ndarray) -> PlantStep:
+        """Hold ``tau`` over one period T and integrate (classical RK4, T/h steps).
+
+        Raises
+        ------
+        PlantError
+            ``tau`` has the wrong shape or is not finite (nothing is integrated), or the state
+            became non-finite (the state is left as it was).
+        """
+        tau = self._vector(tau, "tau")
+        applied, saturated = self.limit(tau)
+        h = self.config.step
+        q, qd = self.q, self.qd
+        for _ in range(self.config.substeps):
+            k1q, k1v = qd, self.acceleration(q, qd, applied)
+            q2, v2 = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
+            k2q, k2v = v2, self.acceleration(q2, v2, applied)
+            q3, v3 = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
+            k3q, k3v = v3, self.acceleration(q3, v3, applied)
+            q4, v4 = q + h * k3q, qd + h * k3v
+            k4q, k4v = v4, self.acceleration(q4, v4, applied)
+            q = q + (h / 6.0) * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
+            qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise PlantError(f"state became non-finite at sample {self.k}; not applied")
+        self.q, self.qd = q, qd
+        self.k += 1
+        return PlantStep(q=q.copy(), qd=qd.copy(), applied=applied, saturated=saturated)
+
+    def energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """Kinetic plus potential energy (J), for conservation checks."""
+        kinetic = pin.computeKineticEnergy(self._model, self._data, q, qd)
+        potential = pin.computePotentialEnergy(self._model, self._data, q)
+        return float(kinetic + potential)

@@ -1,0 +1,239 @@
+"""What a run is: arm, payload, model error, move, timing and controller, and how to build it.
+
+A :class:`Scenario` is plain data (loadable from YAML or argparse); :func:`build` turns it into
+the plant's robot, the controller's robot and the plan; :func:`make_feedback` builds a feedback
+law by name. The paper's three cases are :func:`paper_scenario`.
+
+Angles
+------
+All joint angles in apc are the URDF's, which for the PUMA are the standard-DH angles of
+``config/reference/puma560.json``. The paper's angles (Lee's PUMA convention) map onto them as
+``(q1, -q2, -q3)``: the paper's start (0, 45, 45) deg is (0, -45, -45) deg here, its end
+(90, -45, 135) deg is (90, 45, -135) deg, and its stretched pose (45, 0, 90) deg at 0.5 s is
+(45, 0, -90) deg, where upper arm and forearm are in line (checked in ``test/test_robot.py``).
+``PAPER_JOINT_SIGN`` converts errors to the paper's sign convention for plots.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedforward.nominal import Feedforward
+from apc_feedforward.trajectory import FourThreeFour
+from apc_msgs_py.robot import (
+    PAPER_GRAVITY_M_S2,
+    PAPER_MAX_PAYLOAD_KG,
+    Payload,
+    Robot,
+    load_robot,
+    with_inertia_error,
+    with_payload,
+)
+from apc_plant_sim.offline import RunResult, run_closed_loop
+from apc_plant_sim.plant import Plant, PlantConfig
+
+#: Repository root when running from a checkout (config/ lives there).
+REPO_ROOT = Path(__file__).resolve().parents[3]
+CONFIG_DIR = REPO_ROOT / "config"
+PUMA_3DOF_URDF = CONFIG_DIR / "puma560_3dof.urdf"
+PAPER_JOINT_SIGN = np.array([1.0, -1.0, -1.0])
+PAPER_CASES = {"a": 0.0, "b": PAPER_MAX_PAYLOAD_KG / 2.0, "c": PAPER_MAX_PAYLOAD_KG}
+CONTROLLERS = ("adaptive", "computed_torque", "pd", "none")
+
+
+class ScenarioError(ValueError):
+    """A bad scenario value; the message names the field."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines one run except the feedback law's own settings.
+
+    Attributes
+    ----------
+    urdf : str
+        Path to the arm's URDF.
+    payload_kg : float
+        Payload mass on the plant only (the controllers do not know it).
+    payload_frame : str or None
+        Frame carrying the payload (``None``: body of the last joint).
+    payload_com_m : 3 floats
+        Payload centre of mass in ``payload_frame`` (m).
+    inertia_error : n floats
+        Relative error of the controller's link inertia tensors (paper: +-10 %).
+    q_start_deg, q_goal_deg : n floats
+        The move, in URDF angles (deg).
+    segment_times : 3 floats
+        4-3-4 segment durations (s).
+    lift_off, set_down : float
+        4-3-4 via points as fractions of each joint's travel.
+    period, step : float
+        Sampling period T and RK4 step h (s).
+    hold_s : float
+        Time simulated after the move ends (s).
+    gravity : float
+        m/s^2.
+    """
+
+    urdf: str = str(PUMA_3DOF_URDF)
+    payload_kg: float = 0.0
+    payload_frame: str | None = "wrist_center"
+    payload_com_m: tuple[float, ...] = (0.0, 0.0, 0.0)
+    inertia_error: tuple[float, ...] = (0.1, -0.1, 0.1)
+    q_start_deg: tuple[float, ...] = (0.0, -45.0, -45.0)
+    q_goal_deg: tuple[float, ...] = (90.0, 45.0, -135.0)
+    segment_times: tuple[float, ...] = (0.2, 0.6, 0.2)
+    lift_off: float = 0.1
+    set_down: float = 0.9
+    period: float = 0.010
+    step: float = 0.0025
+    hold_s: float = 0.5
+    gravity: float = PAPER_GRAVITY_M_S2
+    lock_joints: tuple[str, ...] = field(default_factory=tuple)
+
+    @staticmethod
+    def from_dict(values: Mapping[str, Any]) -> Scenario:
+        """Build from a mapping (YAML); unknown keys are rejected with their name."""
+        known = {f.name for f in fields(Scenario)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ScenarioError(f"unknown scenario key {unknown[0]!r}")
+        clean = {}
+        for key, value in values.items():
+            clean[key] = tuple(value) if isinstance(value, list) else value
+        return Scenario(**clean)
+
+    @property
+    def duration(self) -> float:
+        return float(sum(self.segment_times))
+
+    @property
+    def n_samples(self) -> int:
+        """Periods simulated: the move plus the hold."""
+        return round((self.duration + self.hold_s) / self.period)
+
+    @property
+    def move_end_sample(self) -> int:
+        return round(self.duration / self.period)
+
+
+def paper_scenario(case: str, **overrides: Any) -> Scenario:
+    """The paper's experiment, case ``a`` (no load), ``b`` (half of 5 lb) or ``c`` (5 lb)."""
+    if case not in PAPER_CASES:
+        raise ScenarioError(f"case must be one of {sorted(PAPER_CASES)}, got {case!r}")
+    return Scenario(payload_kg=PAPER_CASES[case], **overrides)
+
+
+@dataclass(frozen=True)
+class Built:
+    """The objects a run needs."""
+
+    plant_robot: Robot
+    controller_robot: Robot
+    trajectory: FourThreeFour
+    plant_config: PlantConfig
+
+
+def build(scenario: Scenario) -> Built:
+    """Load the URDF once and derive the plant's and the controller's robots and the plan."""
+    robot = load_robot(scenario.urdf, gravity=scenario.gravity, lock_joints=scenario.lock_joints)
+    n = robot.n_joints
+    for name in ("inertia_error", "q_start_deg", "q_goal_deg"):
+        if len(getattr(scenario, name)) != n:
+            raise ScenarioError(f"{name} needs {n} values for {robot.source}")
+    plant_robot = with_payload(
+        robot,
+        Payload(
+            mass_kg=scenario.payload_kg,
+            com_m=tuple(scenario.payload_com_m),
+            frame=scenario.payload_frame,
+        ),
+    )
+    controller_robot = with_inertia_error(robot, scenario.inertia_error)
+    trajectory = FourThreeFour(
+        np.deg2rad(scenario.q_start_deg),
+        np.deg2rad(scenario.q_goal_deg),
+        segment_times=tuple(scenario.segment_times),
+        lift_off=scenario.lift_off,
+        set_down=scenario.set_down,
+    )
+    plant_config = PlantConfig(period=scenario.period, step=scenario.step)
+    return Built(plant_robot, controller_robot, trajectory, plant_config)
+
+
+def make_feedback(
+    kind: str, controller_robot: Robot, period: float, params: Mapping[str, Any] | None = None
+) -> FeedbackLaw:
+    """A feedback law by name: ``adaptive``, ``computed_torque``, ``pd`` or ``none``.
+
+    ``params`` are the law's settings (:class:`AdaptiveConfig` fields for ``adaptive``,
+    ``kp``/``kv`` for ``computed_torque`` and ``pd``).
+    """
+    params = dict(params or {})
+    model = controller_robot.model
+    if kind == "adaptive":
+        params.setdefault("period", period)
+        return AdaptiveFeedback(model, AdaptiveConfig.from_dict(params))
+    if kind == "computed_torque":
+        return ComputedTorque(model, PdGains.from_dict(params))
+    if kind == "pd":
+        return PD(model.nv, PdGains.from_dict(params))
+    if kind == "none":
+        if params:
+            raise FeedbackError(f"controller 'none' takes no parameters, got {sorted(params)}")
+        return NoFeedback(model.nv)
+    raise FeedbackError(f"controller must be one of {', '.join(CONTROLLERS)}, got {kind!r}")
+
+
+def run_offline(
+    scenario: Scenario,
+    controller: str,
+    params: Mapping[str, Any] | None = None,
+    n_samples: int | None = None,
+) -> RunResult:
+    """Build the scenario and run the closed loop without ROS."""
+    built = build(scenario)
+    q0, qd0, _ = built.trajectory.sample(0.0)
+    plant = Plant(built.plant_robot, built.plant_config, q0, qd0)
+    feedforward = Feedforward(built.controller_robot.model, built.trajectory, scenario.period)
+    feedback = make_feedback(controller, built.controller_robot, scenario.period, params)
+    result = run_closed_loop(
+        plant, feedforward, feedback, scenario.n_samples if n_samples is None else n_samples
+    )
+    result.meta.update(
+        controller=controller, payload_kg=scenario.payload_kg, params=dict(params or {})
+    )
+    return result
+
+
+def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I."""
+    return {"q_position": 0.1, "q_velocity": 0.1, "r": 1e-6, "rho": 0.95, "alpha": alpha}
+
+
+def joint_sign_to_paper(n: int) -> np.ndarray:
+    """Sign per joint that turns URDF-angle errors into the paper's convention (PUMA only)."""
+    sign = np.ones(n)
+    sign[: min(n, 3)] = PAPER_JOINT_SIGN[: min(n, 3)]
+    return sign
+
+
+__all__: Sequence[str] = (
+    "CONTROLLERS",
+    "PAPER_CASES",
+    "Built",
+    "Scenario",
+    "ScenarioError",
+    "build",
+    "make_feedback",
+    "paper_scenario",
+    "paper_settings",
+    "run_offline",
+)
