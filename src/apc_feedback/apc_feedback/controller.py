@@ -43,11 +43,15 @@ class FeedbackOutput:
         A-priori RLS residual of Eq. 26 for the step ``k-1 -> k`` (adaptive law only).
     trace_p : float
         ``trace(P)`` after the update (adaptive law only; NaN otherwise).
+    rejected : bool
+        The identifier refused this sample's update (it would have made P or Θ non-finite or
+        P indefinite, which is what covariance wind-up ends in); the previous estimate is kept.
     """
 
     du: np.ndarray
     residual: np.ndarray | None = None
     trace_p: float = float("nan")
+    rejected: bool = False
 
 
 class FeedbackLaw(ABC):
@@ -102,9 +106,16 @@ class AdaptiveConfig:
         ``Q = diag(q_position I_n, q_velocity I_n)`` of Eq. 34 (paper: ``Q = 0.1 I_6``).
     r : float
         ``R = r I_n`` of Eq. 34 (paper: ``1e-6``).
-    rho, alpha, forgetting, trace_max :
+    rho, alpha, forgetting :
         RLS settings (:class:`apc_feedback.rls.RlsConfig`); paper: rho = 0.95,
         alpha = 1500 (P1) or 150000 (P2).
+    trace_max : float
+        Wind-up guard, an upper bound on ``trace(P)``. ``0`` (default) means
+        ``trace(P(0)) = alpha (3n+1)``: never less certain than at the start. A negative value
+        disables the guard (the paper's RLS). Measured in ``bench/trace_guard.py``: without it
+        a 20 s hold winds ``trace(P)`` up to 1e20-1e45, the identifier's updates become
+        unusable (P loses definiteness) and with a position-weighted Q the arm diverges; with
+        it nothing is rejected and errors during the move are equal or smaller.
     control_form : {"exact", "printed"}
         Eq. 35: exact minimiser ``-(R + GᵀQG)⁻¹GᵀQ(F x + w)`` or as printed
         ``-(R + GᵀQG)⁻¹GᵀQF(x + w)``.
@@ -122,7 +133,7 @@ class AdaptiveConfig:
     rho: float = 0.95
     alpha: float = 1.5e5
     forgetting: Literal["exponential", "printed"] = "exponential"
-    trace_max: float | None = None
+    trace_max: float = 0.0
     control_form: Literal["exact", "printed"] = "exact"
     initial_model: SeriesForm = "corrected"
     identify_with: Literal["applied", "commanded"] = "applied"
@@ -148,14 +159,23 @@ class AdaptiveConfig:
             raise FeedbackError(
                 f"identify_with must be 'applied' or 'commanded', got {self.identify_with!r}"
             )
+        if not np.isfinite(self.trace_max):
+            raise FeedbackError(f"trace_max must be finite, got {self.trace_max}")
         try:
             self.rls_config()
         except RlsError as exc:
             raise FeedbackError(str(exc)) from None
 
-    def rls_config(self) -> RlsConfig:
+    def rls_config(self, n_joints: int = 1) -> RlsConfig:
+        """The identifier's settings for an arm of ``n_joints`` (resolves ``trace_max``)."""
+        if self.trace_max < 0.0:
+            trace_max = None
+        elif self.trace_max == 0.0:
+            trace_max = self.alpha * (3 * n_joints + 1)
+        else:
+            trace_max = self.trace_max
         return RlsConfig(
-            rho=self.rho, alpha=self.alpha, forgetting=self.forgetting, trace_max=self.trace_max
+            rho=self.rho, alpha=self.alpha, forgetting=self.forgetting, trace_max=trace_max
         )
 
     @staticmethod
@@ -198,11 +218,12 @@ class AdaptiveFeedback(FeedbackLaw):
         )
         self.R = config.r * np.eye(n)
         validate_weights(self.Q, self.R, 2 * n, n)
-        self.rls = Rls(n, config.rls_config())
+        self.rls = Rls(n, config.rls_config(n))
         self.reset()
 
     def reset(self) -> None:
         self._started = False
+        self.rejected_updates = 0
         self._dx_prev = np.zeros(2 * self.n_joints)
         self._du_prev = np.zeros(self.n_joints)
         self._u_n_prev = np.zeros(self.n_joints)
@@ -222,6 +243,7 @@ class AdaptiveFeedback(FeedbackLaw):
         if not np.all(np.isfinite(dx)):
             raise FeedbackError(f"state error is not finite at sample {k}")
         residual = None
+        rejected = False
         if not self._started:
             F0, G0 = initial_model(
                 self.model, q_d, qd_d, u_n, self.config.period, self.config.initial_model
@@ -234,7 +256,12 @@ class AdaptiveFeedback(FeedbackLaw):
             else:
                 du_prev = self._du_prev
             z = Rls.regressor(self._dx_prev, du_prev)
-            residual = self.rls.update(z, dx).residual
+            try:
+                residual = self.rls.update(z, dx).residual
+            except RlsError:
+                # Keep controlling with the last good estimate; the node counts and reports it.
+                rejected = True
+                self.rejected_updates += 1
         du = one_step_control(
             self.rls.F,
             self.rls.G,
@@ -248,4 +275,4 @@ class AdaptiveFeedback(FeedbackLaw):
         self._dx_prev = dx
         self._du_prev = du
         self._u_n_prev = np.array(u_n, dtype=float)
-        return FeedbackOutput(du=du, residual=residual, trace_p=self.rls.trace_p)
+        return FeedbackOutput(du=du, residual=residual, trace_p=self.rls.trace_p, rejected=rejected)

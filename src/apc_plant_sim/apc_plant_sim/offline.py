@@ -42,6 +42,8 @@ class RunResult:
     saturated : (N+1, n) bool ndarray
     residual_norm, trace_p : (N+1,) ndarray
         RLS telemetry (NaN where the law has none or at the first sample).
+    rejected : (N+1,) bool ndarray
+        The identifier refused the update at that sample (covariance wind-up).
     F, G, w : ndarray or None
         Identified parameters per sample, (N+1, 2n, 2n), (N+1, 2n, n), (N+1, 2n), for the
         adaptive law.
@@ -61,6 +63,7 @@ class RunResult:
     saturated: np.ndarray
     residual_norm: np.ndarray
     trace_p: np.ndarray
+    rejected: np.ndarray
     F: np.ndarray | None = None
     G: np.ndarray | None = None
     w: np.ndarray | None = None
@@ -111,6 +114,7 @@ def run_closed_loop(
     saturated = np.zeros((rows, n), dtype=bool)
     residual_norm = np.full(rows, np.nan)
     trace_p = np.full(rows, np.nan)
+    rejected = np.zeros(rows, dtype=bool)
     rls = getattr(feedback, "rls", None) if record_parameters else None
     F = np.zeros((rows, 2 * n, 2 * n)) if rls is not None else None
     G = np.zeros((rows, 2 * n, n)) if rls is not None else None
@@ -128,6 +132,7 @@ def run_closed_loop(
         out["q_d"][i], out["qd_d"][i], out["qdd_d"][i] = sp.q, sp.qd, sp.qdd
         out["u_n"][i], out["du"][i] = sp.u_n, fb.du
         trace_p[i] = fb.trace_p
+        rejected[i] = fb.rejected
         if fb.residual is not None:
             residual_norm[i] = float(np.linalg.norm(fb.residual))
         if rls is not None:
@@ -145,6 +150,7 @@ def run_closed_loop(
         saturated=saturated,
         residual_norm=residual_norm,
         trace_p=trace_p,
+        rejected=rejected,
         F=F,
         G=G,
         w=w,

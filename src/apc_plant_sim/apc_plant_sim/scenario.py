@@ -214,8 +214,19 @@ def run_offline(
 
 
 def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I."""
-    return {"q_position": 0.1, "q_velocity": 0.1, "r": 1e-6, "rho": 0.95, "alpha": alpha}
+    """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I.
+
+    As printed, the RLS has no wind-up guard (``trace_max < 0``); the corrected Eqs. 30, 33b
+    and 35 are used (DESIGN.md).
+    """
+    return {
+        "q_position": 0.1,
+        "q_velocity": 0.1,
+        "r": 1e-6,
+        "rho": 0.95,
+        "alpha": alpha,
+        "trace_max": -1.0,
+    }
 
 
 def joint_sign_to_paper(n: int) -> np.ndarray:

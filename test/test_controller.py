@@ -1,0 +1,185 @@
+"""Feedback laws: computed torque is Eq. 36, the adaptive law is Eqs. 29-35 wired correctly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
+from apc_feedback.linearize import initial_model
+from apc_feedback.optimal import one_step_control
+from apc_msgs_py.robot import load_robot, with_inertia_error
+from apc_plant_sim.scenario import CONFIG_DIR, make_feedback
+
+rng = np.random.default_rng(7)
+
+
+@pytest.fixture(scope="module")
+def controller_robot():
+    return with_inertia_error(load_robot(CONFIG_DIR / "puma560_3dof.urdf"), [0.1, -0.1, 0.1])
+
+
+def _random_sample(n=3):
+    q, qd = rng.normal(size=n), rng.normal(size=n)
+    q_d, qd_d, qdd_d = (
+        q + 0.01 * rng.normal(size=n),
+        qd + 0.1 * rng.normal(size=n),
+        rng.normal(size=n),
+    )
+    return q, qd, q_d, qd_d, qdd_d
+
+
+def test_computed_torque_is_eq36(controller_robot):
+    """u_n + du = D(q)[qdd_d + Kv(qd_d - qd) + Kp(q_d - q)] + h(q, qd) + c(q), on the model."""
+    model = controller_robot.model
+    data = model.createData()
+    law = ComputedTorque(model, PdGains(kp=100.0, kv=20.0))
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, data, q_d, qd_d, qdd_d)
+    du = law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None).du
+    D = pin.crba(model, data, q)
+    D = np.triu(D) + np.triu(D, 1).T
+    hc = pin.nonLinearEffects(model, data, q, qd)
+    tau = D @ (qdd_d + 20.0 * (qd_d - qd) + 100.0 * (q_d - q)) + hc
+    np.testing.assert_allclose(u_n + du, tau, atol=1e-9)
+
+
+def test_computed_torque_on_the_plan_is_the_nominal_torque(controller_robot):
+    """On the set point with no error, computed torque adds nothing to u_n."""
+    model = controller_robot.model
+    q_d, qd_d, qdd_d = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    du = ComputedTorque(model).update(0, q_d, qd_d, q_d, qd_d, qdd_d, u_n, None).du
+    np.testing.assert_allclose(du, 0.0, atol=1e-10)
+
+
+def test_pd_and_none():
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    du = PD(3, PdGains(kp=50.0, kv=5.0)).update(0, q, qd, q_d, qd_d, qdd_d, None, None).du
+    np.testing.assert_allclose(du, 50.0 * (q_d - q) + 5.0 * (qd_d - qd))
+    np.testing.assert_array_equal(
+        NoFeedback(3).update(0, q, qd, q_d, qd_d, qdd_d, None, None).du, 0.0
+    )
+
+
+def test_adaptive_first_sample_uses_eq33_and_eq35(controller_robot):
+    """Sample 0: F(0), G(0) from Eq. 33 at the nominal point, w = 0, du from Eq. 35 (exact)."""
+    model = controller_robot.model
+    config = AdaptiveConfig()
+    law = AdaptiveFeedback(model, config)
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    out = law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    F0, G0 = initial_model(model, q_d, qd_d, u_n, config.period)
+    np.testing.assert_array_equal(law.rls.F, F0)
+    np.testing.assert_array_equal(law.rls.G, G0)
+    dx = np.concatenate([q - q_d, qd - qd_d])
+    Q, R = np.diag([0.1] * 6), 1e-6 * np.eye(3)
+    np.testing.assert_allclose(out.du, one_step_control(F0, G0, np.zeros(6), Q, R, dx), rtol=1e-12)
+    assert out.residual is None
+    assert out.trace_p == pytest.approx(1.5e5 * 10)
+
+
+def test_adaptive_regressor_uses_applied_torque_minus_previous_nominal(controller_robot):
+    """z(k-1) = (dx(k-1), applied(k-1) - u_n(k-1), 1): the identification sees what was applied."""
+    model = controller_robot.model
+    law = AdaptiveFeedback(model, AdaptiveConfig())
+    seen = []
+    real_update = law.rls.update
+
+    def spy(z, dx_next):
+        seen.append((z.copy(), dx_next.copy()))
+        return real_update(z, dx_next)
+
+    law.rls.update = spy  # type: ignore[method-assign]
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n0 = rng.normal(size=3)
+    out0 = law.update(0, q, qd, q_d, qd_d, qdd_d, u_n0, None)
+    applied = u_n0 + out0.du + np.array([5.0, 0.0, -5.0])  # e.g. clipped by a torque limit
+    q1, qd1 = q + 0.001, qd - 0.01
+    law.update(1, q1, qd1, q_d, qd_d, qdd_d, rng.normal(size=3), applied)
+    z, target = seen[0]
+    dx0 = np.concatenate([q - q_d, qd - qd_d])
+    np.testing.assert_array_equal(z, np.concatenate([dx0, applied - u_n0, [1.0]]))
+    np.testing.assert_array_equal(target, np.concatenate([q1 - q_d, qd1 - qd_d]))
+
+
+def _regulate(robot, truth, w, q_position, q_velocity, samples=300):
+    """Closed loop of the adaptive law with a true linear perturbation system (Eq. 16)."""
+    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    tau0 = pin.rnea(truth.model, truth.model.createData(), q0, np.zeros(3), np.zeros(3))
+    F, G = initial_model(truth.model, q0, np.zeros(3), tau0, 0.01)
+    law = AdaptiveFeedback(
+        robot.model, AdaptiveConfig(q_position=q_position, q_velocity=q_velocity)
+    )
+    dx = np.concatenate([np.deg2rad([1.0, -1.0, 1.0]), np.zeros(3)])
+    applied = None
+    for k in range(samples):
+        out = law.update(k, q0 + dx[:3], dx[3:], q0, np.zeros(3), np.zeros(3), tau0, applied)
+        applied = tau0 + out.du
+        dx = F @ dx + G @ out.du + w
+    assert np.all(np.isfinite(law.rls.P))
+    return dx
+
+
+def test_adaptive_regulates_a_linear_perturbation_system(controller_robot):
+    """The law starts from the wrong model (+-10 % inertia) and still drives dx to ~0."""
+    truth = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    dx = _regulate(controller_robot, truth, np.zeros(6), q_position=1e4, q_velocity=1.0)
+    assert np.abs(dx[:3]).max() < np.deg2rad(1e-4)
+
+
+def test_one_step_law_leaves_an_offset_under_a_constant_bias(controller_robot):
+    """No integral action: a constant bias w (an unknown payload) leaves a position offset.
+
+    For one joint (p+ = p + T v + a u, v+ = v + b u + w_v with a = b T / 2) the fixed point of
+    the one-step law is p = -(q_v / q_p) w_v / T: the offset shrinks in proportion to the
+    velocity/position weight ratio. With the paper's Q = 0.1 I (ratio 1) it is w_v / T, which
+    is why the printed settings let a payload's gravity build up as position error.
+    """
+    truth = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    w = np.concatenate([np.zeros(3), [0.0, -0.02, 0.05]])
+    offsets = [
+        np.abs(_regulate(controller_robot, truth, w, q_position=qp, q_velocity=1.0)[:3]).max()
+        for qp in (1e4, 1e5)
+    ]
+    assert offsets[0] == pytest.approx(1e-4 * 0.05 / 0.01, rel=0.05)
+    assert offsets[0] / offsets[1] == pytest.approx(10.0, rel=0.05)
+
+
+def test_adaptive_config_validation():
+    with pytest.raises(FeedbackError, match="unknown adaptive-controller parameter 'rh0'"):
+        AdaptiveConfig.from_dict({"rh0": 0.9})
+    with pytest.raises(FeedbackError, match="rho"):
+        AdaptiveConfig(rho=1.5)
+    with pytest.raises(FeedbackError, match="r must be > 0"):
+        AdaptiveConfig(r=0.0)
+    with pytest.raises(FeedbackError, match="q_position"):
+        AdaptiveConfig(q_position=-1.0)
+    with pytest.raises(FeedbackError, match="control_form"):
+        AdaptiveConfig(control_form="bogus")  # type: ignore[arg-type]
+    with pytest.raises(FeedbackError, match="period"):
+        AdaptiveConfig(period=0.0)
+
+
+@pytest.mark.parametrize(
+    ("kind", "cls"),
+    [
+        ("adaptive", AdaptiveFeedback),
+        ("computed_torque", ComputedTorque),
+        ("pd", PD),
+        ("none", NoFeedback),
+    ],
+)
+def test_make_feedback_by_name(controller_robot, kind, cls):
+    assert isinstance(make_feedback(kind, controller_robot, 0.01), cls)
+
+
+def test_make_feedback_rejects_unknown():
+    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    with pytest.raises(FeedbackError, match="controller must be one of"):
+        make_feedback("lqr", robot, 0.01)
+    with pytest.raises(FeedbackError, match="unknown gain parameter 'kd'"):
+        make_feedback("pd", robot, 0.01, {"kd": 1.0})
