@@ -2,7 +2,8 @@
 
 Runs the paper's move followed by a long hold (poor excitation, where trace(P) winds up) for
 cases (a) and (c), adaptive control with the printed settings (P2(0) = 150000 I) and with a
-position-weighted Q, with ``trace_max`` = -1 (off) and 0 (= trace(P(0)) = alpha (3n+1), the default).
+position-weighted Q, with ``trace_max`` = -1 (off) and 0 (= trace(P(0)) = alpha (3n+1),
+the default).
 Prints JSON: per configuration the max |error| during the move and during the hold (deg),
 final trace(P), max |du| (N m) during the hold.
 

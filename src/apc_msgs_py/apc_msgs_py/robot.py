@@ -107,6 +107,19 @@ def _float_attr(elem: ET.Element, attr: str, where: str) -> float:
     return value
 
 
+def _vector_attr(elem: ET.Element | None, attr: str, where: str, default: str) -> np.ndarray:
+    """A 3-vector attribute such as ``xyz="0 0 1"``; absent means ``default``."""
+    text = default if elem is None else elem.get(attr, default)
+    parts = text.split()
+    try:
+        values = np.array([float(v) for v in parts])
+    except ValueError:
+        raise RobotModelError(f"{where}: '{attr}' is not 3 numbers: {text!r}") from None
+    if values.shape != (3,) or not np.all(np.isfinite(values)):
+        raise RobotModelError(f"{where}: '{attr}' must be 3 finite numbers, got {text!r}")
+    return values
+
+
 def _check_urdf_xml(text: str) -> None:
     """Reject what Pinocchio's URDF parser would silently accept or drop.
 
@@ -130,11 +143,20 @@ def _check_urdf_xml(text: str) -> None:
             raise RobotModelError(f"{where}: missing <mass>")
         if _float_attr(mass, "value", where + " <mass>") < 0.0:
             raise RobotModelError(f"{where}: negative mass")
+        origin = inertial.find("origin")
+        _vector_attr(origin, "xyz", where + " <origin>", "0 0 0")
+        _vector_attr(origin, "rpy", where + " <origin>", "0 0 0")
         inertia = inertial.find("inertia")
         if inertia is None:
             raise RobotModelError(f"{where}: missing <inertia>")
-        for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+        ixx, ixy, ixz, iyy, iyz, izz = (
             _float_attr(inertia, attr, where + " <inertia>")
+            for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        )
+        tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        scale = max(1.0, float(np.abs(tensor).max()))
+        if np.linalg.eigvalsh(tensor).min() < -1e-9 * scale:
+            raise RobotModelError(f"{where}: inertia tensor is not positive semidefinite")
     for joint in root.findall("joint"):
         name = joint.get("name", "?")
         jtype = joint.get("type")
@@ -143,7 +165,14 @@ def _check_urdf_xml(text: str) -> None:
                 f"joint '{name}' has type '{jtype}': apc supports revolute, prismatic and fixed "
                 "joints (nq == nv); continuous and floating joints are not supported"
             )
+        where = f"joint '{name}'"
+        origin = joint.find("origin")
+        _vector_attr(origin, "xyz", where + " <origin>", "0 0 0")
+        _vector_attr(origin, "rpy", where + " <origin>", "0 0 0")
         if jtype in _MOVABLE:
+            axis = _vector_attr(joint.find("axis"), "xyz", where + " <axis>", "1 0 0")
+            if np.linalg.norm(axis) < 1e-9:
+                raise RobotModelError(f"{where}: <axis> must not be zero")
             limit = joint.find("limit")
             if limit is None:
                 raise RobotModelError(f"joint '{name}': missing <limit> (effort limit needed)")
