@@ -1,0 +1,243 @@
+"""``feedback_node``: perturbation torques from the joint-state error (Eqs. 29-35, 36).
+
+For each sample ``k`` it waits until it holds both ``joint_states`` and ``feedforward/setpoint``
+stamped ``kT`` (in either order), runs its feedback law once, and publishes ``du(k)`` on
+``feedback/torque`` (stamped ``kT``) and, for the adaptive law, the identified ``[F̂ Ĝ ŵ]``,
+trace(P) and residual norm on ``feedback/estimate``. A re-sent sample (lockstep resend) is
+answered from a cache, so the identifier never sees a sample twice.
+
+Controller kinds: ``adaptive`` (the paper's), ``computed_torque`` (Eq. 36), ``pd``, ``none``.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_msgs_py import wire
+from apc_msgs_py.nodeutil import (
+    ROBOT_PARAMS,
+    Diagnostics,
+    DiagnosticsPublisher,
+    Stopwatch,
+    reject,
+    robot_from_params,
+    run_node,
+)
+from apc_msgs_py.params import ConfigError, Param, declare, subset
+from apc_msgs_py.robot import with_inertia_error
+
+CONTROLLER_KINDS = ("adaptive", "computed_torque", "pd", "none")
+
+PARAMS: tuple[Param, ...] = (
+    *ROBOT_PARAMS,
+    Param(
+        "inertia_error",
+        [],
+        "relative error of the controller's link inertia tensors, one per joint; empty = none",
+    ),
+    Param("controller", "adaptive", f"feedback law: one of {', '.join(CONTROLLER_KINDS)}"),
+    Param(
+        "adaptive.q_position", 0.1, "Q weight of the position error, Eq. 34 (1/rad^2)", 0.0, 1e12
+    ),
+    Param("adaptive.q_velocity", 0.1, "Q weight of the velocity error, Eq. 34", 0.0, 1e12),
+    Param("adaptive.r", 1e-6, "R weight of the torque, Eq. 34 (1/(N m)^2), > 0", 1e-15, 1e12),
+    Param("adaptive.rho", 0.95, "RLS forgetting factor rho, Eqs. 29-31; 0 < rho <= 1", 1e-6, 1.0),
+    Param("adaptive.alpha", 1.5e5, "P(0) = alpha I, Eq. 32", 1e-12, 1e15),
+    Param(
+        "adaptive.trace_max",
+        0.0,
+        "RLS wind-up guard, bound on trace(P): 0 = trace(P(0)) = alpha (3n+1); < 0 = off",
+        -1.0,
+        1e30,
+    ),
+    Param(
+        "adaptive.forgetting",
+        "exponential",
+        "Eq. 30: 'exponential' (P divided by rho) or 'printed' (as printed, never forgets)",
+    ),
+    Param(
+        "adaptive.control_form",
+        "exact",
+        "Eq. 35: 'exact' minimiser -(R+G'QG)^-1 G'Q(F x + w) or 'printed' G'QF(x + w)",
+    ),
+    Param(
+        "adaptive.initial_model",
+        "corrected",
+        "Eq. 33b series: 'corrected' (T^2/2, T^3/6) or 'printed' (T^2, T^3/2)",
+    ),
+    Param(
+        "adaptive.identify_with",
+        "applied",
+        "du(k-1) in the regressor: 'applied' (joint_states effort - u_n) or 'commanded'",
+    ),
+    Param("gains.kp", 100.0, "Kp of computed torque (1/s^2) or PD (N m/rad)", 0.0, 1e9),
+    Param("gains.kv", 20.0, "Kv of computed torque (1/s) or PD (N m s/rad)", 0.0, 1e9),
+)
+
+
+def make_law(kind: str, values: dict[str, Any], model: Any) -> FeedbackLaw:
+    """The feedback law named by the ``controller`` parameter, from the parameter values."""
+    if kind == "adaptive":
+        settings = subset(values, "adaptive.")
+        settings["period"] = values["period"]
+        return AdaptiveFeedback(model, AdaptiveConfig.from_dict(settings))
+    gains = PdGains.from_dict(subset(values, "gains."))
+    if kind == "computed_torque":
+        return ComputedTorque(model, gains)
+    if kind == "pd":
+        return PD(model.nv, gains)
+    if kind == "none":
+        return NoFeedback(model.nv)
+    raise ConfigError(
+        f"parameter 'controller': must be one of {', '.join(CONTROLLER_KINDS)}, got {kind!r}"
+    )
+
+
+class FeedbackNode(Node):
+    """Composable feedback node (see module docstring)."""
+
+    def __init__(
+        self, node_name: str = "feedback_node", *, qos: QoSProfile | None = None, **kwargs: Any
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        qos = qos or wire.CONTROL_QOS
+        values = declare(self, PARAMS)
+        robot = robot_from_params(values)
+        self.joint_names = robot.joint_names
+        n = robot.n_joints
+        error = values["inertia_error"] or [0.0] * n
+        if len(error) != n:
+            raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
+        model = with_inertia_error(robot, error).model
+        try:
+            self.law = make_law(values["controller"], values, model)
+        except FeedbackError as exc:
+            # The law's messages start with the field name ("rho must satisfy ...").
+            prefix = "adaptive." if values["controller"] == "adaptive" else "gains."
+            raise ConfigError(f"parameter '{prefix}{str(exc).split()[0]}': {exc}") from None
+        self.kind = values["controller"]
+        self.period_ns = wire.seconds_to_ns(values["period"])
+        self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self.diagnostics.set("controller", self.kind)
+        self._states: dict[int, wire.JointSample] = {}
+        self._setpoints: dict[int, wire.Setpoint] = {}
+        self._done: tuple[int, JointState, Float64MultiArray | None] | None = None
+        self._torque_msg = JointState()
+        self._estimate_msg = Float64MultiArray()
+        self._started = False
+
+        self.torque_pub = self.create_publisher(JointState, wire.FEEDBACK_TORQUE, qos)
+        self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, qos)
+        self.create_subscription(JointState, wire.JOINT_STATES, self._on_joint_state, qos)
+        self.create_subscription(JointTrajectory, wire.SETPOINT, self._on_setpoint, qos)
+        DiagnosticsPublisher(self, self.diagnostics)
+
+    def _stale(self, stamp: int, topic: str) -> bool:
+        if self._done is None or stamp > self._done[0]:
+            return False
+        if stamp == self._done[0]:
+            if topic == wire.JOINT_STATES:
+                # Re-sent sample: answer from the cache, never update the identifier twice.
+                self.diagnostics.count("resent")
+                self.torque_pub.publish(self._done[1])
+                if self._done[2] is not None:
+                    self.estimate_pub.publish(self._done[2])
+            return True
+        reject(self, self.diagnostics, topic, wire.WireError(f"stale stamp {stamp} ns"))
+        return True
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        try:
+            sample = wire.joint_state_to_arrays(msg, self.joint_names)
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+            return
+        if self._stale(sample.stamp_ns, wire.JOINT_STATES):
+            return
+        self._states[sample.stamp_ns] = sample
+        self._try(sample.stamp_ns)
+
+    def _on_setpoint(self, msg: JointTrajectory) -> None:
+        try:
+            setpoint = wire.msg_to_setpoint(msg, self.joint_names)
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, wire.SETPOINT, exc)
+            return
+        if self._stale(setpoint.stamp_ns, wire.SETPOINT):
+            return
+        self._setpoints[setpoint.stamp_ns] = setpoint
+        self._try(setpoint.stamp_ns)
+
+    def _try(self, stamp: int) -> None:
+        state, setpoint = self._states.get(stamp), self._setpoints.get(stamp)
+        if state is None or setpoint is None:
+            return
+        # Everything older than this sample can no longer be completed.
+        for pending in (self._states, self._setpoints):
+            for old in [s for s in pending if s <= stamp]:
+                del pending[old]
+        k = stamp // self.period_ns
+        with Stopwatch(self.diagnostics, "compute"):
+            applied = state.effort if (self._started and state.effort is not None) else None
+            try:
+                out = self.law.update(
+                    k,
+                    state.position,
+                    state.velocity,
+                    setpoint.q,
+                    setpoint.qd,
+                    setpoint.qdd,
+                    setpoint.u_n,
+                    applied,
+                )
+            except (FeedbackError, ValueError) as exc:
+                reject(self, self.diagnostics, "feedback_law", exc)
+                return
+            if not np.all(np.isfinite(out.du)):
+                reject(self, self.diagnostics, "feedback_law", FeedbackError("du not finite"))
+                return
+            torque = wire.torque_to_msg(stamp, self.joint_names, out.du, self._torque_msg)
+            estimate = None
+            rls = getattr(self.law, "rls", None)
+            if rls is not None:
+                # 0 before the first identification step: nothing non-finite goes on the wire.
+                residual = float(np.linalg.norm(out.residual)) if out.residual is not None else 0.0
+                estimate = wire.estimate_to_msg(
+                    rls.F,
+                    rls.G,
+                    rls.w,
+                    out.trace_p,
+                    residual,
+                    stamp_ns=stamp,
+                    msg=self._estimate_msg,
+                )
+                self.diagnostics.set("trace_p", f"{out.trace_p:.4g}")
+                self.diagnostics.set("residual_norm", f"{residual:.4g}")
+                if out.rejected:
+                    self.diagnostics.count("rls_rejected_updates")
+        self._started = True
+        self.torque_pub.publish(torque)
+        if estimate is not None:
+            self.estimate_pub.publish(estimate)
+        self._done = (stamp, torque, estimate)
+        self.diagnostics.count("samples")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(
+        FeedbackNode, prog="feedback_node", summary=__doc__ or "", params=PARAMS, args=args
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

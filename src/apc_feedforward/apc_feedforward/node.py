@@ -1,0 +1,217 @@
+"""``feedforward_node``: set points and nominal torques (Eqs. 2-8), one per joint state.
+
+On ``joint_states`` stamped ``kT`` it samples the current plan at ``kT`` and publishes, stamped
+``kT``, the set point on ``feedforward/setpoint`` and ``u_n(k)`` on ``feedforward/torque``.
+Driving both lockstep and real time from the plant's samples keeps every node on the same
+sample index ``k`` without a shared clock.
+
+The plan: at the first joint state the arm's measured position becomes the start; if
+``move.goal_deg`` is set the 4-3-4 move to it starts there, else the arm holds. Goals on
+``feedforward/trajectory`` (any joint order) are planned from the end of the current motion
+and start when it ends; after the last motion the final set point is held.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from apc_feedforward.nominal import Feedforward
+from apc_feedforward.trajectory import (
+    FourThreeFour,
+    Quintic,
+    Trajectory,
+    TrajectoryError,
+    Waypoints,
+)
+from apc_msgs_py import wire
+from apc_msgs_py.nodeutil import (
+    ROBOT_PARAMS,
+    Diagnostics,
+    DiagnosticsPublisher,
+    Stopwatch,
+    reject,
+    robot_from_params,
+    run_node,
+)
+from apc_msgs_py.params import ConfigError, Param, declare
+from apc_msgs_py.robot import with_inertia_error
+
+PARAMS: tuple[Param, ...] = (
+    *ROBOT_PARAMS,
+    Param(
+        "inertia_error",
+        [],
+        "relative error of the controller's link inertia tensors, one per joint (the paper's "
+        "simulation study: [0.1, -0.1, 0.1]); empty = the URDF as is",
+    ),
+    Param(
+        "move.goal_deg",
+        [],
+        "first move: 4-3-4 from the first measured position to this goal (deg, URDF angles); "
+        "empty = hold the first measured position until a goal arrives",
+    ),
+    Param("move.segment_times", [0.2, 0.6, 0.2], "4-3-4 segment durations (s)"),
+    Param("move.lift_off", 0.1, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
+    Param("move.set_down", 0.9, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
+)
+
+
+class FeedforwardNode(Node):
+    """Composable feedforward node (see module docstring).
+
+    Parameters
+    ----------
+    qos : QoSProfile
+        Profile of the control-loop topics (default :data:`apc_msgs_py.wire.CONTROL_QOS`).
+    kwargs :
+        Passed to ``rclpy.node.Node`` (namespace, parameter_overrides, ...).
+    """
+
+    def __init__(
+        self, node_name: str = "feedforward_node", *, qos: QoSProfile | None = None, **kwargs: Any
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        qos = qos or wire.CONTROL_QOS
+        values = declare(self, PARAMS)
+        robot = robot_from_params(values)
+        self.joint_names = robot.joint_names
+        n = robot.n_joints
+        error = values["inertia_error"] or [0.0] * n
+        if len(error) != n:
+            raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
+        self.controller_robot = with_inertia_error(robot, error)
+        goal = values["move.goal_deg"]
+        if goal and len(goal) != n:
+            raise ConfigError(f"parameter 'move.goal_deg': needs {n} values, got {len(goal)}")
+        segments = values["move.segment_times"]
+        if len(segments) != 3 or min(segments) <= 0.0:
+            raise ConfigError("parameter 'move.segment_times': needs 3 positive durations (s)")
+        self._goal = np.deg2rad(goal) if goal else None
+        self._move = dict(
+            segment_times=tuple(segments),
+            lift_off=values["move.lift_off"],
+            set_down=values["move.set_down"],
+        )
+        self.period = values["period"]
+        self.period_ns = wire.seconds_to_ns(self.period)
+        self.feedforward: Feedforward | None = None
+        self._pending: list[Trajectory] = []
+        self._last: tuple[int, Any, Any] | None = None  # (stamp, setpoint msg, torque msg)
+        self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self._setpoint_msg = JointTrajectory()
+        self._torque_msg = JointState()
+
+        self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
+        self.torque_pub = self.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, qos)
+        self.create_subscription(JointState, wire.JOINT_STATES, self._on_joint_state, qos)
+        self.create_subscription(
+            JointTrajectory, wire.TRAJECTORY_GOAL, self._on_goal, wire.TRAJECTORY_GOAL_QOS
+        )
+        DiagnosticsPublisher(self, self.diagnostics)
+
+    # -- plan -----------------------------------------------------------------------------------
+    def _start(self, q: np.ndarray, k: int) -> None:
+        if self._goal is not None:
+            plan: Trajectory = FourThreeFour(q, self._goal, **self._move)
+        else:
+            plan = Quintic(q, q, self.period)
+        self.feedforward = Feedforward(self.controller_robot.model, plan, self.period, k)
+
+    def _advance(self, k: int) -> None:
+        """Start the next queued goal once the current motion has ended."""
+        ff = self.feedforward
+        while self._pending and ff is not None and k >= ff.end_k():
+            ff.set_trajectory(self._pending.pop(0), max(k, ff.end_k()))
+
+    def _on_goal(self, msg: JointTrajectory) -> None:
+        try:
+            waypoints = wire.msg_to_waypoints(msg, self.joint_names)
+            start = self._plan_end()
+            if start is None:
+                raise wire.WireError("no joint state received yet: nothing to plan from")
+            plan = Waypoints(
+                start,
+                waypoints.times_s,
+                waypoints.positions,
+                velocities=waypoints.velocities,
+                accelerations=waypoints.accelerations,
+            )
+        except (wire.WireError, TrajectoryError) as exc:
+            reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
+            return
+        self._pending.append(plan)
+        self.diagnostics.count("goals_accepted")
+        self.get_logger().info(
+            f"goal accepted: {len(waypoints.times_s)} point(s), {waypoints.times_s[-1]:.3f} s"
+        )
+
+    def _plan_end(self) -> np.ndarray | None:
+        if self._pending:
+            return self._pending[-1].sample(self._pending[-1].duration)[0]
+        if self.feedforward is None:
+            return None
+        trajectory = self.feedforward.trajectory
+        return trajectory.sample(trajectory.duration)[0]
+
+    # -- loop -----------------------------------------------------------------------------------
+    def _on_joint_state(self, msg: JointState) -> None:
+        try:
+            sample = wire.joint_state_to_arrays(msg, self.joint_names, require=("position",))
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+            return
+        stamp = sample.stamp_ns
+        if self._last is not None and stamp <= self._last[0]:
+            if stamp == self._last[0]:
+                # The plant re-sent sample k (lockstep resend): answer with the same messages.
+                self.diagnostics.count("resent")
+                self.setpoint_pub.publish(self._last[1])
+                self.torque_pub.publish(self._last[2])
+            else:
+                reject(self, self.diagnostics, wire.JOINT_STATES, wire.WireError("stale stamp"))
+            return
+        if stamp % self.period_ns != 0:
+            reject(
+                self,
+                self.diagnostics,
+                wire.JOINT_STATES,
+                wire.WireError(f"header.stamp {stamp} ns is not a multiple of the period"),
+            )
+            return
+        k = stamp // self.period_ns
+        with Stopwatch(self.diagnostics, "compute"):
+            if self.feedforward is None:
+                self._start(sample.position, k)
+            self._advance(k)
+            assert self.feedforward is not None
+            sp = self.feedforward.sample(k)
+            t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
+            setpoint = wire.setpoint_to_msg(
+                stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
+            )
+            torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
+        self.setpoint_pub.publish(setpoint)
+        self.torque_pub.publish(torque)
+        self._last = (stamp, setpoint, torque)
+        self.diagnostics.count("samples")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(
+        FeedforwardNode,
+        prog="feedforward_node",
+        summary=__doc__ or "",
+        params=PARAMS,
+        args=args,
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,387 @@
+"""``experiment``: run one trajectory through the real nodes and record it, without launch files.
+
+Starts plant, feedforward, feedback and recorder in one process on one executor (default), or
+the three control nodes as separate processes (``--processes``) with the recorder here; runs
+the move and its hold; writes ``<out>/<run>.mcap``; prints progress and a one-line summary;
+exits non-zero on failure. Defaults are the paper's: 3-joint PUMA 560, the 4-3-4 move of its
+simulation study, +-10 % inertia error in the controllers, lockstep timing.
+
+    experiment --case c --controller adaptive --alpha 150000 --out runs
+    experiment --case a --controller computed_torque --mode realtime --processes
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+import yaml
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.parameter import Parameter
+
+from apc_msgs_py.params import ConfigError
+from apc_plant_sim.scenario import (
+    CONTROLLERS,
+    PAPER_CASES,
+    Scenario,
+    paper_scenario,
+    paper_settings,
+)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One experiment run: the scenario, the feedback law and its settings, the timing mode."""
+
+    scenario: Scenario
+    controller: str = "adaptive"
+    settings: Mapping[str, Any] | None = None
+    mode: str = "lockstep"
+    name: str = "run"
+
+    def node_parameters(self) -> dict[str, dict[str, Any]]:
+        """ROS parameters of each node, keyed by node name (a ROS parameter-file layout)."""
+        sc = self.scenario
+        shared = {
+            "robot_description_path": str(sc.urdf),
+            "gravity": float(sc.gravity),
+            "period": float(sc.period),
+            "lock_joints": list(sc.lock_joints),
+        }
+        if not shared["lock_joints"]:
+            del shared["lock_joints"]
+        feedforward = {
+            **shared,
+            "inertia_error": [float(v) for v in sc.inertia_error],
+            "move.goal_deg": [float(v) for v in sc.q_goal_deg],
+            "move.segment_times": [float(v) for v in sc.segment_times],
+            "move.lift_off": float(sc.lift_off),
+            "move.set_down": float(sc.set_down),
+        }
+        feedback: dict[str, Any] = {
+            **shared,
+            "inertia_error": [float(v) for v in sc.inertia_error],
+            "controller": self.controller,
+        }
+        prefix = "adaptive." if self.controller == "adaptive" else "gains."
+        for key, value in (self.settings or {}).items():
+            feedback[prefix + key] = value if isinstance(value, str) else float(value)
+        plant = {
+            **shared,
+            "step": float(sc.step),
+            "mode": self.mode,
+            "payload.mass_kg": float(sc.payload_kg),
+            "payload.frame": sc.payload_frame or "",
+            "payload.com_m": [float(v) for v in sc.payload_com_m],
+            "q_initial_deg": [float(v) for v in sc.q_start_deg],
+            "n_samples": int(sc.n_samples),
+            "wait_for_subscribers": 3,
+        }
+        return {"feedforward_node": feedforward, "feedback_node": feedback, "plant_node": plant}
+
+
+def _overrides(values: Mapping[str, Any]) -> list[Parameter]:
+    return [Parameter(name, value=value) for name, value in values.items()]
+
+
+class Progress:
+    """A one-line progress bar on stderr, drawn only when stderr is a terminal."""
+
+    def __init__(self, total: int, label: str, enabled: bool = True) -> None:
+        self.total, self.label = max(total, 1), label
+        self.enabled = enabled and sys.stderr.isatty()
+        self._last = -1
+
+    def update(self, k: int) -> None:
+        if not self.enabled:
+            return
+        pct = min(100, int(100 * k / self.total))
+        if pct != self._last:
+            bar = "#" * (pct // 4)
+            sys.stderr.write(f"\r{self.label} [{bar:<25}] {pct:3d}%")
+            sys.stderr.flush()
+            self._last = pct
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+@dataclass
+class RunOutcome:
+    path: Path
+    ok: bool
+    message: str
+    samples: int
+    wall_s: float
+
+
+def run_in_process(
+    spec: RunSpec, out_dir: Path, *, progress: bool = True, timeout_s: float = 600.0
+) -> RunOutcome:
+    """Run the four nodes in this process on one ``SingleThreadedExecutor``."""
+    from apc_feedback.node import FeedbackNode
+    from apc_feedforward.node import FeedforwardNode
+    from apc_msgs_py.recorder import RecorderNode
+    from apc_plant_sim.node import PlantNode
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{spec.name}.mcap"
+    params = spec.node_parameters()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes = []
+    t0 = time.monotonic()
+    try:
+        sim_time = [Parameter("use_sim_time", value=True)]
+        recorder = RecorderNode(
+            output=path,
+            context=context,
+            parameter_overrides=sim_time,
+            custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
+        )
+        nodes.append(recorder)
+        plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
+        nodes.append(plant)
+        nodes.append(
+            FeedforwardNode(
+                context=context, parameter_overrides=_overrides(params["feedforward_node"])
+            )
+        )
+        nodes.append(
+            FeedbackNode(context=context, parameter_overrides=_overrides(params["feedback_node"]))
+        )
+        executor = SingleThreadedExecutor(context=context)
+        for node in nodes:
+            executor.add_node(node)
+        bar = Progress(plant.n_samples, spec.name, progress)
+        while not plant.done and time.monotonic() - t0 < timeout_s:
+            executor.spin_once(timeout_sec=0.05)
+            bar.update(plant.k)
+        bar.close()
+        # Let the recorder take what is still queued (the final sample's torques).
+        deadline = time.monotonic() + 0.5
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.01)
+        if not plant.done:
+            return RunOutcome(path, False, f"timed out after {timeout_s} s", plant.k, _since(t0))
+        ok = plant.exit_code == 0
+        message = "ok" if ok else plant.diagnostics.message
+        return RunOutcome(path, ok, message, plant.k, _since(t0))
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return RunOutcome(path, False, "interrupted", 0, _since(t0))
+    finally:
+        for node in reversed(nodes):
+            closer = getattr(node, "close", None)
+            if callable(closer):
+                closer()
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def run_in_processes(
+    spec: RunSpec, out_dir: Path, *, progress: bool = True, timeout_s: float = 600.0
+) -> RunOutcome:
+    """Plant, feedforward and feedback as three processes; the recorder in this one."""
+    from apc_msgs_py.recorder import RecorderNode
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{spec.name}.mcap"
+    params = spec.node_parameters()
+    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as handle:
+        yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}, handle)
+        params_file = handle.name
+    modules = {
+        "plant_node": "apc_plant_sim.node",
+        "feedforward_node": "apc_feedforward.node",
+        "feedback_node": "apc_feedback.node",
+    }
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    procs: dict[str, subprocess.Popen] = {}
+    recorder = None
+    t0 = time.monotonic()
+    try:
+        recorder = RecorderNode(
+            output=path,
+            context=context,
+            parameter_overrides=[Parameter("use_sim_time", value=True)],
+            custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
+        )
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(recorder)
+        for name, module in modules.items():
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-m", module, "--ros-args", "--params-file", params_file],
+                env=os.environ.copy(),
+            )
+        bar = Progress(spec.scenario.n_samples, spec.name, progress)
+        plant = procs["plant_node"]
+        while plant.poll() is None and time.monotonic() - t0 < timeout_s:
+            executor.spin_once(timeout_sec=0.05)
+            bar.update(recorder.counts.get("/joint_states", 0))
+            for name, proc in procs.items():
+                if name != "plant_node" and proc.poll() is not None:
+                    return RunOutcome(
+                        path, False, f"{name} exited with {proc.returncode}", 0, _since(t0)
+                    )
+        bar.close()
+        deadline = time.monotonic() + 0.5
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.01)
+        code = plant.poll()
+        samples = max(recorder.counts.get("/joint_states", 0) - 1, 0)
+        if code is None:
+            return RunOutcome(path, False, f"timed out after {timeout_s} s", samples, _since(t0))
+        return RunOutcome(
+            path,
+            code == 0,
+            "ok" if code == 0 else f"plant_node exited with {code}",
+            samples,
+            _since(t0),
+        )
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return RunOutcome(path, False, "interrupted", 0, _since(t0))
+    finally:
+        stop_processes(procs.values())
+        if recorder is not None:
+            recorder.close()
+            recorder.destroy_node()
+        rclpy.try_shutdown(context=context)
+        Path(params_file).unlink(missing_ok=True)
+
+
+def stop_processes(procs: Sequence[subprocess.Popen] | Any, timeout_s: float = 3.0) -> None:
+    """SIGINT, then SIGTERM, then SIGKILL: every child ends (ROS_WHEELS.md warns of stuck ones)."""
+    procs = list(procs)
+    for sig in ("send_signal", "terminate", "kill"):
+        alive = [p for p in procs if p.poll() is None]
+        if not alive:
+            return
+        for p in alive:
+            if sig == "send_signal":
+                import signal
+
+                p.send_signal(signal.SIGINT)
+            else:
+                getattr(p, sig)()
+        deadline = time.monotonic() + timeout_s
+        for p in alive:
+            try:
+                p.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+
+
+def _since(t0: float) -> float:
+    return time.monotonic() - t0
+
+
+def _describe(spec: RunSpec) -> dict[str, Any]:
+    from dataclasses import asdict
+
+    return {
+        "name": spec.name,
+        "controller": spec.controller,
+        "mode": spec.mode,
+        "settings": dict(spec.settings or {}),
+        "scenario": {
+            k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec.scenario).items()
+        },
+    }
+
+
+def summarize(path: Path) -> str:
+    """One line: max and final |q - q_d| per joint (deg) read back from the recording."""
+    from apc_plant_sim.recording import load_run
+
+    run = load_run(path)
+    err = np.rad2deg(np.abs(run.q - run.q_d))
+    end = run.move_end_index
+    fmt = lambda a: "/".join(f"{v:.3f}" for v in a)  # noqa: E731
+    return (
+        f"{path.name}: {len(run.t)} samples, max |e| {fmt(err[: end + 1].max(axis=0))} deg, "
+        f"final |e| {fmt(err[end])} deg, peak |tau| "
+        f"{'/'.join(f'{v:.1f}' for v in np.nanmax(np.abs(run.effort), axis=0))} N m"
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="experiment", description=__doc__.split("\n\n")[0] if __doc__ else None
+    )
+    parser.add_argument("--case", choices=sorted(PAPER_CASES), default="c", help="paper load case")
+    parser.add_argument("--controller", choices=CONTROLLERS, default="adaptive")
+    parser.add_argument(
+        "--alpha", type=float, default=1.5e5, help="P(0) = alpha I (paper: 1500, 150000)"
+    )
+    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    parser.add_argument("--urdf", help="arm URDF (default: the 3-joint PUMA 560)")
+    parser.add_argument("--payload", type=float, help="payload mass (kg); overrides --case")
+    parser.add_argument("--hold", type=float, default=0.5, help="hold after the move (s)")
+    parser.add_argument("--scenario", help="YAML file of Scenario fields (overrides the case)")
+    parser.add_argument("--out", default="runs", help="output directory")
+    parser.add_argument("--name", help="run name (file stem); default from the settings")
+    parser.add_argument("--processes", action="store_true", help="one process per control node")
+    parser.add_argument("--timeout", type=float, default=600.0, help="wall-clock limit (s)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def spec_from_args(args: argparse.Namespace) -> RunSpec:
+    overrides: dict[str, Any] = {"hold_s": args.hold}
+    if args.urdf:
+        overrides["urdf"] = args.urdf
+    if args.scenario:
+        values = yaml.safe_load(Path(args.scenario).read_text()) or {}
+        scenario = Scenario.from_dict({**values, **overrides})
+    else:
+        scenario = paper_scenario(args.case, **overrides)
+    if args.payload is not None:
+        from dataclasses import replace
+
+        scenario = replace(scenario, payload_kg=args.payload)
+    settings = paper_settings(args.alpha) if args.controller == "adaptive" else None
+    name = args.name or (
+        f"{args.controller}"
+        + (f"_alpha{args.alpha:g}" if args.controller == "adaptive" else "")
+        + f"_{scenario.payload_kg:.3f}kg_{args.mode}"
+    )
+    return RunSpec(scenario, args.controller, settings, args.mode, name)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        spec = spec_from_args(args)
+    except (ValueError, OSError) as exc:
+        print(f"experiment: {exc}", file=sys.stderr)
+        return 2
+    runner = run_in_processes if args.processes else run_in_process
+    try:
+        outcome = runner(spec, Path(args.out), progress=not args.quiet, timeout_s=args.timeout)
+    except ConfigError as exc:
+        print(f"experiment: {exc}", file=sys.stderr)
+        return 2
+    if not outcome.ok:
+        print(
+            f"experiment: FAILED ({outcome.message}) after {outcome.samples} samples",
+            file=sys.stderr,
+        )
+        return 1
+    print(f"{summarize(outcome.path)} [{outcome.wall_s:.1f} s wall]")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,383 @@
+"""``plant_node``: the simulated arm on the wire, in lockstep or in real time.
+
+It publishes ``joint_states`` stamped ``kT`` (``effort`` = torque applied over the period that
+ended at ``k``) and ``/clock``, receives ``u_n(k)`` on ``feedforward/torque`` and ``du(k)`` on
+``feedback/torque``, applies their sum (clipped to the URDF effort limits) over one period and
+integrates (RK4, :mod:`apc_plant_sim.plant`).
+
+Modes
+-----
+``lockstep`` (deterministic; what ``experiment`` uses)
+    The plant owns time. It starts when ``wait_for_subscribers`` nodes listen to
+    ``joint_states`` and both torque topics have a publisher; it advances only when it holds
+    both torques stamped ``kT``. If they do not come within ``resend_s`` it re-sends
+    ``joint_states(k)`` (the controllers answer from a cache); after ``lockstep_timeout_s``
+    the run ends with a clear error instead of hanging.
+``realtime`` (a robot's reality; the default for ``ros2 run``)
+    A wall timer of period T steps the arm with the newest torques it holds. Torques stamped
+    earlier than the sample are *late*, none at all *missing*; both are counted, never waited
+    for. Safe policy: with no fresh feedback torque for ``watchdog_s`` the nominal torque alone
+    is applied (reported as a warning); with no fresh nominal torque for ``watchdog_s`` the
+    arm *brakes* -- integration stops with zero velocity, as a PUMA's brakes would hold it --
+    and a fault is reported until fresh torques return.
+
+``n_samples > 0`` ends the node after that many periods (``experiment``); 0 runs until stopped.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+
+from apc_msgs_py import wire
+from apc_msgs_py.nodeutil import (
+    ROBOT_PARAMS,
+    Diagnostics,
+    DiagnosticsPublisher,
+    Stopwatch,
+    reject,
+    robot_from_params,
+    run_node,
+)
+from apc_msgs_py.params import ConfigError, Param, declare
+from apc_msgs_py.robot import Payload, RobotModelError, with_payload
+from apc_plant_sim.plant import Plant, PlantConfig, PlantError
+
+MODES = ("realtime", "lockstep")
+
+PARAMS: tuple[Param, ...] = (
+    *ROBOT_PARAMS,
+    Param("step", 0.0025, "RK4 integration step h (s); must divide period", 1e-6, 1.0),
+    Param("mode", "realtime", "'realtime' (wall timer, newest torques) or 'lockstep'"),
+    Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
+    Param("payload.frame", "", "frame carrying the payload; empty = body of the last joint"),
+    Param("payload.com_m", [0.0, 0.0, 0.0], "payload centre of mass in payload.frame (m)"),
+    Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
+    Param("enforce_torque_limits", True, "clip |tau| to the URDF effort limits"),
+    Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
+    Param(
+        "wait_for_subscribers",
+        2,
+        "lockstep: start when this many nodes subscribe to joint_states (2: ff and fb)",
+        0,
+        1000,
+    ),
+    Param(
+        "resend_s", 0.5, "lockstep: re-send joint_states(k) after this wall time (s)", 0.01, 60.0
+    ),
+    Param(
+        "lockstep_timeout_s",
+        10.0,
+        "lockstep: end the run with an error if sample k gets no torques for this long (s)",
+        0.1,
+        3600.0,
+    ),
+    Param(
+        "watchdog_s",
+        0.05,
+        "realtime: a torque older than this (wall s) is missing: no feedback -> nominal only; "
+        "no nominal -> brake",
+        0.0,
+        60.0,
+    ),
+    Param("publish_clock", True, "publish /clock = kT (sim time for use_sim_time nodes)"),
+)
+
+
+class PlantNode(Node):
+    """Composable plant node (see module docstring).
+
+    Attributes
+    ----------
+    done : bool
+        The run has ended (``n_samples`` reached, or a lockstep timeout).
+    exit_code : int
+        0 on success, 1 after a lockstep timeout.
+    """
+
+    def __init__(
+        self, node_name: str = "plant_node", *, qos: QoSProfile | None = None, **kwargs: Any
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        qos = qos or wire.CONTROL_QOS
+        values = declare(self, PARAMS)
+        robot = robot_from_params(values)
+        self.joint_names = robot.joint_names
+        n = robot.n_joints
+        self.mode = values["mode"]
+        if self.mode not in MODES:
+            raise ConfigError(
+                f"parameter 'mode': must be one of {', '.join(MODES)}, got {self.mode!r}"
+            )
+        try:
+            payload = Payload(
+                mass_kg=values["payload.mass_kg"],
+                com_m=tuple(values["payload.com_m"]),
+                frame=values["payload.frame"] or None,
+            )
+            plant_robot = with_payload(robot, payload)
+        except RobotModelError as exc:
+            raise ConfigError(f"parameter 'payload': {exc}") from None
+        try:
+            config = PlantConfig(
+                period=values["period"],
+                step=values["step"],
+                enforce_torque_limits=values["enforce_torque_limits"],
+            )
+        except PlantError as exc:
+            raise ConfigError(f"parameter '{str(exc).split()[0]}': {exc}") from None
+        q0 = values["q_initial_deg"] or [0.0] * n
+        if len(q0) != n:
+            raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
+        self.plant = Plant(plant_robot, config, np.deg2rad(q0))
+        self.period_ns = wire.seconds_to_ns(config.period)
+        self.n_samples = values["n_samples"]
+        self._values = values
+        self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self.diagnostics.set("mode", self.mode)
+        self.done = False
+        self.exit_code = 0
+        self.started = False
+        self._ff: dict[int, np.ndarray] = {}
+        self._fb: dict[int, np.ndarray] = {}
+        self._ff_latest: tuple[int, np.ndarray, float] | None = None  # stamp, effort, wall time
+        self._fb_latest: tuple[int, np.ndarray, float] | None = None
+        self._applied: np.ndarray | None = None
+        self._sent_wall = 0.0
+        self._first_sent_wall = 0.0
+        self._braking = False
+        self._js_msg = JointState()
+        self._clock_msg = ClockMsg()
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
+
+        self.js_pub = self.create_publisher(JointState, wire.JOINT_STATES, qos)
+        self.clock_pub = (
+            self.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
+            if values["publish_clock"]
+            else None
+        )
+        self.ff_sub = self.create_subscription(
+            JointState, wire.FEEDFORWARD_TORQUE, self._on_feedforward, qos
+        )
+        self.fb_sub = self.create_subscription(
+            JointState, wire.FEEDBACK_TORQUE, self._on_feedback, qos
+        )
+        DiagnosticsPublisher(self, self.diagnostics)
+        if self.mode == "lockstep":
+            self._timer = self.create_timer(0.01, self._lockstep_watch, clock=self._wall)
+        else:
+            self._timer = self.create_timer(config.period, self._realtime_tick, clock=self._wall)
+
+    # -- wire -----------------------------------------------------------------------------------
+    @property
+    def k(self) -> int:
+        return self.plant.k
+
+    def _publish_state(self, resend: bool = False) -> None:
+        stamp = self.k * self.period_ns
+        if self.clock_pub is not None:
+            self._clock_msg.clock = wire.ns_to_stamp(stamp, self._clock_msg.clock)
+            self.clock_pub.publish(self._clock_msg)
+        msg = wire.arrays_to_joint_state(
+            stamp,
+            self.joint_names,
+            position=self.plant.q,
+            velocity=self.plant.qd,
+            effort=self._applied if self._applied is not None else None,
+            msg=self._js_msg,
+        )
+        self.js_pub.publish(msg)
+        self._sent_wall = time.monotonic()
+        if not resend:
+            self._first_sent_wall = self._sent_wall
+
+    def _read_torque(self, msg: JointState, topic: str) -> wire.Torque | None:
+        try:
+            return wire.msg_to_torque(msg, self.joint_names)
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, topic, exc)
+            return None
+
+    def _on_feedforward(self, msg: JointState) -> None:
+        torque = self._read_torque(msg, wire.FEEDFORWARD_TORQUE)
+        if torque is not None:
+            self._take(torque, self._ff, "_ff_latest", wire.FEEDFORWARD_TORQUE)
+
+    def _on_feedback(self, msg: JointState) -> None:
+        torque = self._read_torque(msg, wire.FEEDBACK_TORQUE)
+        if torque is not None:
+            self._take(torque, self._fb, "_fb_latest", wire.FEEDBACK_TORQUE)
+
+    def _take(self, torque: wire.Torque, pending: dict, latest_attr: str, topic: str) -> None:
+        stamp = torque.stamp_ns
+        current = self.k * self.period_ns
+        if stamp > current or stamp % self.period_ns:
+            error = wire.WireError(f"header.stamp {stamp} ns is not a sample the plant sent")
+            reject(self, self.diagnostics, topic, error)
+            return
+        latest = getattr(self, latest_attr)
+        if latest is not None and stamp < latest[0]:
+            self.diagnostics.count(f"out_of_order.{topic}")
+            return
+        if stamp == current and self.started:
+            self.diagnostics.time(f"latency.{topic}", time.monotonic() - self._first_sent_wall)
+        setattr(self, latest_attr, (stamp, torque.effort, time.monotonic()))
+        if self.mode == "lockstep":
+            pending[stamp] = torque.effort
+            self._lockstep_try()
+
+    # -- lockstep -------------------------------------------------------------------------------
+    def _ready(self) -> bool:
+        return (
+            self.js_pub.get_subscription_count() >= self._values["wait_for_subscribers"]
+            and self.ff_sub.get_publisher_count() >= 1
+            and self.fb_sub.get_publisher_count() >= 1
+        )
+
+    def _lockstep_watch(self) -> None:
+        if self.done:
+            return
+        if not self.started:
+            if self._ready():
+                self.started = True
+                self.get_logger().info(f"lockstep: starting at sample {self.k}")
+                self._publish_state()
+            return
+        now = time.monotonic()
+        waited = now - self._first_sent_wall
+        if waited > self._values["lockstep_timeout_s"]:
+            stamp = self.k * self.period_ns
+            missing = [
+                topic
+                for topic, pending in (
+                    (wire.FEEDFORWARD_TORQUE, self._ff),
+                    (wire.FEEDBACK_TORQUE, self._fb),
+                )
+                if stamp not in pending
+            ]
+            self.get_logger().error(
+                f"lockstep: no {' and no '.join(missing)} for sample {self.k} after "
+                f"{waited:.1f} s; ending the run (is the peer node running?)"
+            )
+            self.diagnostics.level = DiagnosticStatus.ERROR
+            self.diagnostics.message = f"lockstep timeout at sample {self.k}"
+            self.exit_code = 1
+            self.done = True
+        elif now - self._sent_wall > self._values["resend_s"]:
+            self.diagnostics.count("resent")
+            self._publish_state(resend=True)
+
+    def _lockstep_try(self) -> None:
+        stamp = self.k * self.period_ns
+        if self.done or not self.started or stamp not in self._ff or stamp not in self._fb:
+            return
+        if self.n_samples and self.k >= self.n_samples:
+            # The torques of the final sample are in (recorded); nothing more to integrate.
+            self.done = True
+            return
+        tau = self._ff.pop(stamp) + self._fb.pop(stamp)
+        self._step(tau)
+        self._publish_state()
+
+    def _step(self, tau: np.ndarray) -> None:
+        with Stopwatch(self.diagnostics, "integrate"):
+            try:
+                result = self.plant.step(tau)
+            except PlantError as exc:
+                reject(self, self.diagnostics, "integrate", exc)
+                result = None
+        if result is None:
+            self._applied = np.zeros(len(self.joint_names))
+            return
+        self._applied = result.applied
+        if result.saturated.any():
+            self.diagnostics.count("saturated_samples")
+            for name in np.asarray(self.joint_names)[result.saturated]:
+                self.diagnostics.count(f"saturated.{name}")
+        self.diagnostics.count("samples")
+
+    # -- real time ------------------------------------------------------------------------------
+    def _realtime_tick(self) -> None:
+        if self.done:
+            return
+        now = time.monotonic()
+        if not self.started:
+            self.started = True
+            self._publish_state()
+            return
+        stamp = self.k * self.period_ns
+        watchdog = self._values["watchdog_s"]
+        ff, fb = self._ff_latest, self._fb_latest
+        ff_fresh = ff is not None and now - ff[2] <= watchdog + self.plant.config.period
+        fb_fresh = fb is not None and now - fb[2] <= watchdog + self.plant.config.period
+        late = False
+        for latest, topic in ((ff, wire.FEEDFORWARD_TORQUE), (fb, wire.FEEDBACK_TORQUE)):
+            if latest is None:
+                self.diagnostics.count(f"missing.{topic}")
+                late = True
+            elif latest[0] < stamp:
+                self.diagnostics.count(f"late.{topic}")
+                late = True
+        if late:
+            self.diagnostics.count("late_samples")
+        if not ff_fresh:
+            self._brake()
+        else:
+            if self._braking:
+                self.get_logger().info("nominal torque back: releasing the brake")
+                self._braking = False
+                self.diagnostics.level = DiagnosticStatus.OK
+                self.diagnostics.message = "ok"
+            du = fb[1] if fb_fresh and fb is not None else np.zeros(len(self.joint_names))
+            if not fb_fresh:
+                self.diagnostics.count("feedback_missing_samples")
+                self.diagnostics.level = DiagnosticStatus.WARN
+                self.diagnostics.message = "no fresh feedback torque: applying nominal torque only"
+            elif self.diagnostics.level == DiagnosticStatus.WARN:
+                self.diagnostics.level = DiagnosticStatus.OK
+                self.diagnostics.message = "ok"
+            assert ff is not None
+            self._step(ff[1] + du)
+        self.diagnostics.time("period", now - getattr(self, "_last_tick", now))
+        self._last_tick = now
+        self._publish_state()
+        if self.n_samples and self.k >= self.n_samples:
+            self.done = True
+
+    def _brake(self) -> None:
+        if not self._braking:
+            self.get_logger().error(
+                f"no fresh nominal torque for {self._values['watchdog_s']} s: braking"
+            )
+            self._braking = True
+            self.diagnostics.count("watchdog_trips")
+        self.diagnostics.level = DiagnosticStatus.ERROR
+        self.diagnostics.message = "no nominal torque: brakes engaged (holding position)"
+        self.plant.qd = np.zeros(len(self.joint_names))
+        self.plant.k += 1
+        self._applied = np.zeros(len(self.joint_names))
+        self.diagnostics.count("braked_samples")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(
+        PlantNode,
+        prog="plant_node",
+        summary=__doc__ or "",
+        params=PARAMS,
+        args=args,
+        spin_until=lambda node: node.done,
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

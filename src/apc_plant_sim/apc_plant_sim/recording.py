@@ -1,0 +1,149 @@
+"""Read an apc recording (MCAP) back into per-sample arrays, aligned by header stamp.
+
+Row ``i`` of every array is the sample stamped ``t[i]`` (s). Where a topic has no message for a
+sample (a real-time run that lost one, or the last sample's torques), the row is NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from apc_msgs_py import wire
+from apc_msgs_py.bag import bag_info, read_messages
+
+
+@dataclass
+class RecordedRun:
+    """Arrays of one recording; joints in ``joint_names`` order.
+
+    Attributes
+    ----------
+    t : (N,) ndarray
+        Sample times (s) of the ``joint_states`` messages.
+    q, qd : (N, n)
+        Measured state (rad, rad/s).
+    effort : (N, n)
+        Torque applied over the period that *ended* at the sample (N m); NaN at the first.
+    q_d, qd_d, qdd_d, u_n : (N, n)
+        Set point and nominal torque.
+    du : (N, n)
+        Feedback torque.
+    trace_p, residual_norm : (N,)
+        Identification telemetry (NaN without an adaptive law).
+    theta : (N, 2n, 3n+1) or None
+        ``[F̂ Ĝ ŵ]`` per sample.
+    run : dict
+        The experiment description stored in the file (``custom_data['apc.run']``), if any.
+    """
+
+    path: Path
+    joint_names: tuple[str, ...]
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    effort: np.ndarray
+    q_d: np.ndarray
+    qd_d: np.ndarray
+    qdd_d: np.ndarray
+    u_n: np.ndarray
+    du: np.ndarray
+    trace_p: np.ndarray
+    residual_norm: np.ndarray
+    theta: np.ndarray | None
+    run: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.q - self.q_d
+
+    @property
+    def move_end_index(self) -> int:
+        """Row of the end of the move (from the stored scenario), else the last row."""
+        scenario = self.run.get("scenario", {})
+        if "segment_times" in scenario and "period" in scenario:
+            end = round(sum(scenario["segment_times"]) / scenario["period"])
+            return int(min(end, len(self.t) - 1))
+        return len(self.t) - 1
+
+
+_TOPICS = (wire.JOINT_STATES, wire.SETPOINT, wire.FEEDBACK_TORQUE, wire.ESTIMATE)
+
+
+def load_run(path: str | Path) -> RecordedRun:
+    """Read ``joint_states``, set points, torques and estimates of a recording."""
+    path = Path(path)
+    info = bag_info(path)
+    meta = info.get("rosbag2_metadata") or {}
+    custom = (meta.get("rosbag2_bagfile_information") or meta).get("custom_data") or {}
+    run = yaml.safe_load(custom["apc.run"]) if "apc.run" in custom else {}
+    states: dict[int, Any] = {}
+    setpoints: dict[int, Any] = {}
+    feedback: dict[int, Any] = {}
+    estimates: dict[int, Any] = {}
+    names: tuple[str, ...] | None = None
+    for m in read_messages(path):
+        # Recorded names are resolved (``/joint_states``, ``/puma/joint_states`` ...).
+        tail = next((t for t in _TOPICS if m.topic.endswith("/" + t)), None)
+        if tail == wire.JOINT_STATES:
+            msg = m.decode()
+            names = names or tuple(msg.name)
+            states[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif tail == wire.SETPOINT:
+            msg = m.decode()
+            setpoints[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif tail == wire.FEEDBACK_TORQUE:
+            msg = m.decode()
+            feedback[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif tail == wire.ESTIMATE:
+            est = wire.msg_to_estimate(m.decode())
+            estimates[est.stamp_ns] = est
+    if names is None:
+        raise ValueError(f"{path}: no joint_states recorded")
+    stamps = sorted(states)
+    n, rows = len(names), len(stamps)
+
+    def blank(*shape: int) -> np.ndarray:
+        return np.full((rows, *shape), np.nan)
+
+    q, qd, effort = blank(n), blank(n), blank(n)
+    q_d, qd_d, qdd_d, u_n, du = blank(n), blank(n), blank(n), blank(n), blank(n)
+    trace_p, residual = blank(), blank()
+    theta = None
+    for i, stamp in enumerate(stamps):
+        js = wire.joint_state_to_arrays(states[stamp], names, require=("position", "velocity"))
+        q[i], qd[i] = js.position, js.velocity
+        if js.effort is not None:
+            effort[i] = js.effort
+        if stamp in setpoints:
+            sp = wire.msg_to_setpoint(setpoints[stamp], names)
+            q_d[i], qd_d[i], qdd_d[i], u_n[i] = sp.q, sp.qd, sp.qdd, sp.u_n
+        if stamp in feedback:
+            du[i] = wire.msg_to_torque(feedback[stamp], names).effort
+        if stamp in estimates:
+            est = estimates[stamp]
+            trace_p[i], residual[i] = est.trace_p, est.residual_norm
+            if theta is None:
+                theta = np.full((rows, *est.theta.shape), np.nan)
+            theta[i] = est.theta
+    return RecordedRun(
+        path=path,
+        joint_names=names,
+        t=np.array(stamps, dtype=float) / wire.NS_PER_S,
+        q=q,
+        qd=qd,
+        effort=effort,
+        q_d=q_d,
+        qd_d=qd_d,
+        qdd_d=qdd_d,
+        u_n=u_n,
+        du=du,
+        trace_p=trace_p,
+        residual_norm=residual,
+        theta=theta,
+        run=run or {},
+    )

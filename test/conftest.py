@@ -1,0 +1,19 @@
+"""Shared test set-up: every test process talks DDS on its own random domain, on localhost only."""
+
+from __future__ import annotations
+
+import os
+import random
+
+import pytest
+
+# Set before any rclpy context is created (contexts read the environment at init), so tests that
+# run nodes never see another run's traffic and never leave this machine.
+os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+@pytest.fixture
+def ros_domain() -> str:
+    """The DDS domain of this test process (children inherit it)."""
+    return os.environ["ROS_DOMAIN_ID"]
