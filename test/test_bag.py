@@ -12,6 +12,7 @@ import array
 import io
 import os
 import random
+import select
 import signal
 import subprocess
 import sys
@@ -30,6 +31,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.utilities import get_rmw_implementation_identifier
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosgraph_msgs.msg import Clock
@@ -231,7 +233,10 @@ def test_serialize_exact_trims_the_estimate_and_decodes_equal(label):
     msg, padding = SAMPLES[label]
     exact = bag.serialize_exact(msg)
     assert len(exact) == bag.cdr_size(msg)
-    assert len(serialize_message(msg)) - len(exact) == padding  # what serialize_message pads
+    extra = len(serialize_message(msg)) - len(exact)
+    if get_rmw_implementation_identifier() == "rmw_fastrtps_cpp":
+        assert extra == padding  # what serialize_message pads (its buffer size is an estimate)
+    assert extra >= 0
     assert deserialize_message(exact, type(msg)) == msg
     # rosbags is strict about the size: it accepts the exact bytes ...
     type_name = bag.message_type_name(msg)
@@ -241,7 +246,7 @@ def test_serialize_exact_trims_the_estimate_and_decodes_equal(label):
     assert_same(msg, decoded)
     assert len(typestore.serialize_cdr(decoded, type_name)) == len(exact)
     # ... and rejects serialize_message's buffer when it carries 4 or more extra bytes.
-    if padding > 3:
+    if extra > 3:
         with pytest.raises(Exception, match="size mismatch"):
             typestore.deserialize_cdr(bytes(serialize_message(msg)), type_name)
 
@@ -739,18 +744,23 @@ _CHILD = textwrap.dedent(
 def test_sigkill_loses_at_most_the_open_chunk(tmp_path):
     path = tmp_path / "killed.mcap"
     n = 1000
-    child = subprocess.Popen(
-        [sys.executable, "-c", _CHILD, str(path), str(n)],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    errors = tmp_path / "child.err"
+    with open(errors, "w") as stderr:
+        child = subprocess.Popen(
+            [sys.executable, "-c", _CHILD, str(path), str(n)],
+            stdout=subprocess.PIPE,
+            stderr=stderr,
+            text=True,
+        )
     try:
-        line = child.stdout.readline()
-        assert line.strip() == "written", line
+        ready, _, _ = select.select([child.stdout], [], [], 30.0)
+        line = child.stdout.readline() if ready else ""
+        assert line.strip() == "written", f"child did not finish writing: {errors.read_text()}"
     finally:
-        child.send_signal(signal.SIGKILL)
+        child.send_signal(signal.SIGKILL)  # no finish(): the file has no summary and no footer
         child.wait(timeout=10)
         child.stdout.close()
+    assert child.returncode == -signal.SIGKILL
     with pytest.warns(BagTruncatedWarning):
         read = list(bag.read_messages(path))
     size = len(bag.serialize_exact(wire.arrays_to_joint_state(0, ["a", "b", "c"], np.zeros(3))))

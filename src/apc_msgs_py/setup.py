@@ -1,6 +1,25 @@
+from glob import glob
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 package_name = "apc_msgs_py"
+
+# config/ is a relative symlink to the repository's top-level config/ (URDFs, parameter files,
+# reference data); its files are installed as copies into share/apc_msgs_py/config, where
+# apc_msgs_py.nodeutil.resolve_config_path finds them through ament_index_python.
+_HERE = Path(__file__).resolve().parent
+
+
+def _config_files(pattern: str) -> list[str]:
+    """Files matching ``pattern``, relative to this directory as setuptools wants them."""
+    files = sorted(glob(pattern, root_dir=_HERE))
+    if not files:
+        raise SystemExit(
+            f"apc_msgs_py: no config files match {pattern!r} (is config/ a dangling link?)"
+        )
+    return files
+
 
 setup(
     name=package_name,
@@ -9,6 +28,11 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
+        (
+            "share/" + package_name + "/config",
+            _config_files("config/*.urdf") + _config_files("config/*.yaml"),
+        ),
+        ("share/" + package_name + "/config/reference", _config_files("config/reference/*.json")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

@@ -102,7 +102,7 @@ class FeedforwardNode(Node):
         self.period = values["period"]
         self.period_ns = wire.seconds_to_ns(self.period)
         self.feedforward: Feedforward | None = None
-        self._pending: list[Trajectory] = []
+        self._pending: list[wire.Waypoints] = []
         self._last: tuple[int, Any, Any] | None = None  # (stamp, setpoint msg, torque msg)
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self._setpoint_msg = JointTrajectory()
@@ -125,40 +125,49 @@ class FeedforwardNode(Node):
         self.feedforward = Feedforward(self.controller_robot.model, plan, self.period, k)
 
     def _advance(self, k: int) -> None:
-        """Start the next queued goal once the current motion has ended."""
+        """Start the next queued goal once the current motion has ended.
+
+        A goal is planned when it becomes active, from the last set point of the motion before
+        it, so goals can be queued before the first joint state or during a motion.
+        """
         ff = self.feedforward
         while self._pending and ff is not None and k >= ff.end_k():
-            ff.set_trajectory(self._pending.pop(0), max(k, ff.end_k()))
+            goal = self._pending.pop(0)
+            start = ff.trajectory.sample(ff.trajectory.duration)[0]
+            try:
+                plan = self._plan(start, goal)
+            except TrajectoryError as exc:
+                reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
+                continue
+            ff.set_trajectory(plan, max(k, ff.end_k()))
+            self.diagnostics.count("goals_started")
+            self.get_logger().info(f"sample {k}: starting a {plan.duration:.3f} s goal")
+
+    @staticmethod
+    def _plan(start: np.ndarray, goal: wire.Waypoints) -> Trajectory:
+        return Waypoints(
+            start,
+            goal.times_s,
+            goal.positions,
+            velocities=goal.velocities,
+            accelerations=goal.accelerations,
+        )
 
     def _on_goal(self, msg: JointTrajectory) -> None:
         try:
-            waypoints = wire.msg_to_waypoints(msg, self.joint_names)
-            start = self._plan_end()
-            if start is None:
-                raise wire.WireError("no joint state received yet: nothing to plan from")
-            plan = Waypoints(
-                start,
-                waypoints.times_s,
-                waypoints.positions,
-                velocities=waypoints.velocities,
-                accelerations=waypoints.accelerations,
-            )
+            goal = wire.msg_to_waypoints(msg, self.joint_names)
+            # Check the goal now (timing, shapes) with its first point as a stand-in start; it is
+            # planned for real from the end of the motion before it when it starts.
+            self._plan(goal.positions[0], goal)
         except (wire.WireError, TrajectoryError) as exc:
             reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
             return
-        self._pending.append(plan)
+        self._pending.append(goal)
         self.diagnostics.count("goals_accepted")
         self.get_logger().info(
-            f"goal accepted: {len(waypoints.times_s)} point(s), {waypoints.times_s[-1]:.3f} s"
+            f"goal accepted: {len(goal.times_s)} point(s), {goal.times_s[-1]:.3f} s, "
+            f"{len(self._pending)} queued"
         )
-
-    def _plan_end(self) -> np.ndarray | None:
-        if self._pending:
-            return self._pending[-1].sample(self._pending[-1].duration)[0]
-        if self.feedforward is None:
-            return None
-        trajectory = self.feedforward.trajectory
-        return trajectory.sample(trajectory.duration)[0]
 
     # -- loop -----------------------------------------------------------------------------------
     def _on_joint_state(self, msg: JointState) -> None:

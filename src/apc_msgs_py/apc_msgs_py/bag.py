@@ -22,10 +22,12 @@ readers here read such a truncated file (every message of every complete chunk),
 
 Raw bytes, not ``serialize_message``
 ------------------------------------
-``rclpy.serialization.serialize_message`` returns a buffer sized by an *estimate*: for messages
-with empty ``float64[]`` fields (a torque ``JointState`` has empty ``position`` and
-``velocity``) or an empty struct it is 4-8 bytes longer than the CDR, and strict readers
-(rosbags) reject the padded message. A subscription created with ``raw=True`` hands over the
+``rclpy.serialization.serialize_message`` returns a buffer sized by an *estimate*, which is exact
+for full ``JointState``, set point, estimate, ``Clock`` and ``DiagnosticArray`` messages but
+longer than the CDR for messages with empty numeric sequences: 4 bytes per empty ``float64[]``
+(8 for a torque ``JointState``, whose ``position`` and ``velocity`` are empty; 44 for a
+three-point goal with positions only), 3 for ``std_msgs/Empty``. rosbags rejects a message with
+4 or more trailing bytes. A subscription created with ``raw=True`` hands over the
 exact bytes that were on the wire (what rosbag2 records), so the recorder passes those to
 :meth:`BagWriter.write`. :meth:`BagWriter.write_message` (for code that holds a message object,
 e.g. an offline run) serialises with :func:`serialize_exact`, which trims the buffer to the size
@@ -53,6 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
 import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
@@ -952,18 +955,10 @@ class BagWriter:
 
 
 def _check_time(value: Any, name: str) -> int:
+    if isinstance(value, np.integer):
+        value = int(value)
     if isinstance(value, bool) or not isinstance(value, int):
-        try:
-            import numpy as np
-
-            if isinstance(value, np.integer):
-                value = int(value)
-            else:
-                raise TypeError
-        except TypeError:
-            raise BagError(
-                f"{name}: must be integer nanoseconds, got {type(value).__name__}"
-            ) from None
+        raise BagError(f"{name}: must be integer nanoseconds, got {type(value).__name__}")
     if not 0 <= value < 2**64:
         raise BagError(f"{name}: {value} is outside [0, 2**64) ns")
     return value

@@ -4,20 +4,16 @@ Every node takes its topic names and QoS from here (no topic string literal in a
 and every message that crosses the wire goes through one of the converters below, so that a
 malformed message is rejected at the border with a :class:`WireError` that names the field.
 
-Topics (all relative, so a namespace such as ``/puma`` moves a whole arm)
-------------------------------------------------------------------------
-=========================  ===============================  ===========================
-constant                   type                             QoS
-=========================  ===============================  ===========================
-``JOINT_STATES``           ``sensor_msgs/JointState``       :data:`CONTROL_QOS`
-``SETPOINT``               ``trajectory_msgs/JointTrajectory`` (one point)  :data:`CONTROL_QOS`
-``FEEDFORWARD_TORQUE``     ``sensor_msgs/JointState``       :data:`CONTROL_QOS`
-``FEEDBACK_TORQUE``        ``sensor_msgs/JointState``       :data:`CONTROL_QOS`
-``ESTIMATE``               ``std_msgs/Float64MultiArray``   :data:`CONTROL_QOS`
-``TRAJECTORY_GOAL``        ``trajectory_msgs/JointTrajectory`` :data:`TRAJECTORY_GOAL_QOS`
-``CLOCK`` (absolute)       ``rosgraph_msgs/Clock``          :data:`CLOCK_QOS`
-``DIAGNOSTICS`` (absolute) ``diagnostic_msgs/DiagnosticArray`` :data:`DIAGNOSTICS_QOS`
-=========================  ===============================  ===========================
+Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and diagnostics global)
+---------------------------------------------------------------------------------------------------
+- ``JOINT_STATES``: ``sensor_msgs/JointState``, :data:`CONTROL_QOS`
+- ``SETPOINT``: ``trajectory_msgs/JointTrajectory`` with one point, :data:`CONTROL_QOS`
+- ``FEEDFORWARD_TORQUE``, ``FEEDBACK_TORQUE``: ``sensor_msgs/JointState`` (name + effort),
+  :data:`CONTROL_QOS`
+- ``ESTIMATE``: ``std_msgs/Float64MultiArray`` (:func:`estimate_to_msg`), :data:`CONTROL_QOS`
+- ``TRAJECTORY_GOAL``: ``trajectory_msgs/JointTrajectory``, :data:`TRAJECTORY_GOAL_QOS`
+- ``CLOCK`` (absolute): ``rosgraph_msgs/Clock``, :data:`CLOCK_QOS`
+- ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
 
 :data:`TOPICS` holds the same table as :class:`TopicSpec` rows for the recorder.
 
@@ -390,7 +386,8 @@ def _check_finite(values: np.ndarray, field: str, labels: Sequence[str], max_abs
 
 
 def _label(labels: Sequence[str], i: int) -> str:
-    if labels and len(labels) > 0:
+    """``joint 'j2' (index 1)`` for a per-joint vector, ``index i`` otherwise."""
+    if len(labels) > 0:
         return f"joint {labels[i % len(labels)]!r} (index {i})"
     return f"index {i}"
 

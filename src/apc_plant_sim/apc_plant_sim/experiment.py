@@ -90,6 +90,24 @@ class RunSpec:
         return {"feedforward_node": feedforward, "feedback_node": feedback, "plant_node": plant}
 
 
+def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
+    """True once the recorder has discovered the controllers' publishers (so sample 0 is kept)."""
+    from apc_msgs_py import wire
+
+    topics = [wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE]
+    if controller == "adaptive":
+        topics.append(wire.ESTIMATE)
+    return all(recorder.count_publishers(recorder.resolve_topic_name(t)) >= 1 for t in topics)
+
+
+def _wait(executor: Any, condition: Any, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{what} not discovered within {timeout_s} s")
+        executor.spin_once(timeout_sec=0.02)
+
+
 def _overrides(values: Mapping[str, Any]) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in values.items()]
 
@@ -151,8 +169,6 @@ def run_in_process(
             custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
         )
         nodes.append(recorder)
-        plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
-        nodes.append(plant)
         nodes.append(
             FeedforwardNode(
                 context=context, parameter_overrides=_overrides(params["feedforward_node"])
@@ -164,6 +180,16 @@ def run_in_process(
         executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
+        _wait(
+            executor,
+            lambda: _recorder_hears_controllers(recorder, spec.controller),
+            30.0,
+            "the controllers' publishers",
+        )
+        # The plant comes last: it starts the run once everything listens (wait_for_subscribers).
+        plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
+        nodes.append(plant)
+        executor.add_node(plant)
         bar = Progress(plant.n_samples, spec.name, progress)
         while not plant.done and time.monotonic() - t0 < timeout_s:
             executor.spin_once(timeout_sec=0.05)
@@ -180,6 +206,8 @@ def run_in_process(
         return RunOutcome(path, ok, message, plant.k, _since(t0))
     except (KeyboardInterrupt, ExternalShutdownException):
         return RunOutcome(path, False, "interrupted", 0, _since(t0))
+    except TimeoutError as exc:
+        return RunOutcome(path, False, str(exc), 0, _since(t0))
     finally:
         for node in reversed(nodes):
             closer = getattr(node, "close", None)
@@ -220,11 +248,22 @@ def run_in_processes(
         )
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(recorder)
-        for name, module in modules.items():
+
+        def start(name: str) -> None:
             procs[name] = subprocess.Popen(
-                [sys.executable, "-m", module, "--ros-args", "--params-file", params_file],
+                [sys.executable, "-m", modules[name], "--ros-args", "--params-file", params_file],
                 env=os.environ.copy(),
             )
+
+        start("feedforward_node")
+        start("feedback_node")
+        _wait(
+            executor,
+            lambda: _recorder_hears_controllers(recorder, spec.controller),
+            60.0,
+            "the controllers' publishers",
+        )
+        start("plant_node")
         bar = Progress(spec.scenario.n_samples, spec.name, progress)
         plant = procs["plant_node"]
         while plant.poll() is None and time.monotonic() - t0 < timeout_s:
@@ -252,6 +291,8 @@ def run_in_processes(
         )
     except (KeyboardInterrupt, ExternalShutdownException):
         return RunOutcome(path, False, "interrupted", 0, _since(t0))
+    except TimeoutError as exc:
+        return RunOutcome(path, False, str(exc), 0, _since(t0))
     finally:
         stop_processes(procs.values())
         if recorder is not None:

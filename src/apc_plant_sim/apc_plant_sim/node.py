@@ -8,8 +8,7 @@ integrates (RK4, :mod:`apc_plant_sim.plant`).
 Modes
 -----
 ``lockstep`` (deterministic; what ``experiment`` uses)
-    The plant owns time. It starts when ``wait_for_subscribers`` nodes listen to
-    ``joint_states`` and both torque topics have a publisher; it advances only when it holds
+    The plant owns time. It advances only when it holds
     both torques stamped ``kT``. If they do not come within ``resend_s`` it re-sends
     ``joint_states(k)`` (the controllers answer from a cache); after ``lockstep_timeout_s``
     the run ends with a clear error instead of hanging.
@@ -20,6 +19,10 @@ Modes
     is applied (reported as a warning); with no fresh nominal torque for ``watchdog_s`` the
     arm *brakes* -- integration stops with zero velocity, as a PUMA's brakes would hold it --
     and a fault is reported until fresh torques return.
+
+In both modes the arm stays still (brakes on) until ``wait_for_subscribers`` nodes listen to
+``joint_states`` and both torque topics have a publisher; then sample 0 is sent (in real
+time, again every ``resend_s`` until both torques answer it, then the clock runs).
 
 ``n_samples > 0`` ends the node after that many periods (``experiment``); 0 runs until stopped.
 """
@@ -67,7 +70,7 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "wait_for_subscribers",
         2,
-        "lockstep: start when this many nodes subscribe to joint_states (2: ff and fb)",
+        "start when this many nodes subscribe to joint_states (2: ff and fb; 3 with a recorder)",
         0,
         1000,
     ),
@@ -77,7 +80,8 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "lockstep_timeout_s",
         10.0,
-        "lockstep: end the run with an error if sample k gets no torques for this long (s)",
+        "lockstep: end the run with an error if the peers are not there at start, or sample k "
+        "gets no torques, for this long (s)",
         0.1,
         3600.0,
     ),
@@ -154,6 +158,7 @@ class PlantNode(Node):
         self._applied: np.ndarray | None = None
         self._sent_wall = 0.0
         self._first_sent_wall = 0.0
+        self._created_wall = time.monotonic()
         self._braking = False
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
@@ -251,6 +256,11 @@ class PlantNode(Node):
                 self.started = True
                 self.get_logger().info(f"lockstep: starting at sample {self.k}")
                 self._publish_state()
+            elif time.monotonic() - self._created_wall > self._values["lockstep_timeout_s"]:
+                self._fail(
+                    f"lockstep: peers missing after {self._values['lockstep_timeout_s']} s: "
+                    f"{self._missing_peers()}"
+                )
             return
         now = time.monotonic()
         waited = now - self._first_sent_wall
@@ -264,17 +274,36 @@ class PlantNode(Node):
                 )
                 if stamp not in pending
             ]
-            self.get_logger().error(
+            self._fail(
                 f"lockstep: no {' and no '.join(missing)} for sample {self.k} after "
                 f"{waited:.1f} s; ending the run (is the peer node running?)"
             )
-            self.diagnostics.level = DiagnosticStatus.ERROR
-            self.diagnostics.message = f"lockstep timeout at sample {self.k}"
-            self.exit_code = 1
-            self.done = True
         elif now - self._sent_wall > self._values["resend_s"]:
             self.diagnostics.count("resent")
             self._publish_state(resend=True)
+
+    def _missing_peers(self) -> str:
+        missing = []
+        subscribers = self.js_pub.get_subscription_count()
+        if subscribers < self._values["wait_for_subscribers"]:
+            missing.append(
+                f"{subscribers} of {self._values['wait_for_subscribers']} subscribers on "
+                f"{wire.JOINT_STATES}"
+            )
+        for sub, topic in (
+            (self.ff_sub, wire.FEEDFORWARD_TORQUE),
+            (self.fb_sub, wire.FEEDBACK_TORQUE),
+        ):
+            if sub.get_publisher_count() < 1:
+                missing.append(f"no publisher on {topic}")
+        return "; ".join(missing) or "none"
+
+    def _fail(self, message: str) -> None:
+        self.get_logger().error(message)
+        self.diagnostics.level = DiagnosticStatus.ERROR
+        self.diagnostics.message = message
+        self.exit_code = 1
+        self.done = True
 
     def _lockstep_try(self) -> None:
         stamp = self.k * self.period_ns
@@ -311,8 +340,17 @@ class PlantNode(Node):
             return
         now = time.monotonic()
         if not self.started:
-            self.started = True
-            self._publish_state()
+            # Like a robot whose brakes stay on until its controllers are up.
+            if self._ready():
+                self.started = True
+                self.get_logger().info("real time: controllers connected, starting")
+                self._publish_state()
+            return
+        if self.k == 0 and (self._ff_latest is None or self._fb_latest is None):
+            # Sample 0 is out; the clock starts once both controllers have answered it, so that
+            # start-up (first callbacks, discovery of the return path) is not counted as late.
+            if now - self._first_sent_wall > self._values["resend_s"]:
+                self._publish_state()
             return
         stamp = self.k * self.period_ns
         watchdog = self._values["watchdog_s"]

@@ -1,0 +1,255 @@
+"""The three nodes over DDS: goals, start-up errors, lockstep timeouts, real time, diagnostics."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from apc_feedback.node import FeedbackNode
+from apc_feedforward.node import FeedforwardNode
+from apc_feedforward.trajectory import Waypoints
+from apc_msgs_py import wire
+from apc_msgs_py.bag import read_messages
+from apc_plant_sim.experiment import RunSpec, run_in_processes
+from apc_plant_sim.node import PlantNode
+from apc_plant_sim.recording import load_run
+from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+
+pytestmark = pytest.mark.ros
+
+
+def _overrides(values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+class Graph:
+    """Nodes of one test on their own context and executor; everything is torn down after."""
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.nodes = []
+
+    def add(self, node):
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, condition, timeout_s=20.0):
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            assert time.monotonic() < deadline, "condition not met in time"
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def close(self):
+        for node in reversed(self.nodes):
+            node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def graph():
+    g = Graph()
+    try:
+        yield g
+    finally:
+        g.close()
+
+
+def test_goal_is_executed_after_the_current_motion(graph):
+    """A JointTrajectory goal (joints in another order) starts when the first move ends."""
+    scenario = paper_scenario("a", hold_s=0.8)
+    params = RunSpec(scenario, "computed_torque").node_parameters()
+    ctx = graph.context
+    ff = graph.add(
+        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+    )
+    graph.add(FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"])))
+    helper = graph.add(rclpy.create_node("goal_sender", context=ctx))
+    goal_pub = helper.create_publisher(
+        JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
+    )
+    setpoints = {}
+    helper.create_subscription(
+        JointTrajectory,
+        wire.SETPOINT,
+        lambda m: setpoints.__setitem__(
+            wire.stamp_to_ns(m.header.stamp), wire.msg_to_setpoint(m, ff.joint_names)
+        ),
+        wire.CONTROL_QOS,
+    )
+    graph.spin_until(lambda: goal_pub.get_subscription_count() >= 1)
+    order = [2, 0, 1]  # joint_3, joint_1, joint_2
+    targets = np.deg2rad([[60.0, 20.0, -120.0], [30.0, 0.0, -90.0]])
+    goal = JointTrajectory(joint_names=[ff.joint_names[i] for i in order])
+    for t, q in zip((0.3, 0.6), targets, strict=True):
+        goal.points.append(
+            JointTrajectoryPoint(
+                positions=[float(q[i]) for i in order],
+                time_from_start=Duration(sec=0, nanosec=round(t * 1e9)),
+            )
+        )
+    goal_pub.publish(goal)
+    graph.spin_until(lambda: ff.diagnostics.counters.get("goals_accepted", 0) == 1)
+    plant_params = dict(params["plant_node"], wait_for_subscribers=2)
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(plant_params)))
+    graph.spin_until(lambda: plant.done, timeout_s=60)
+    assert plant.exit_code == 0
+    graph.spin_until(lambda: len(setpoints) == scenario.n_samples + 1)
+    period_ns = 10_000_000
+    q_end = np.deg2rad(scenario.q_goal_deg)
+    plan = Waypoints(q_end, np.array([0.3, 0.6]), targets)
+    for k in (100, 115, 130, 145, 160, 170, 180):
+        expected = plan.sample((k - 100) * 0.01)
+        np.testing.assert_allclose(setpoints[k * period_ns].q, expected[0], atol=1e-12)
+        np.testing.assert_allclose(setpoints[k * period_ns].qd, expected[1], atol=1e-12)
+    np.testing.assert_allclose(setpoints[130 * period_ns].q, targets[0], atol=1e-12)
+    np.testing.assert_allclose(setpoints[180 * period_ns].q, targets[1], atol=1e-12)
+    # Before the switch the paper's move ran untouched.
+    np.testing.assert_allclose(setpoints[99 * period_ns].q, q_end, atol=np.deg2rad(0.01))
+
+
+def test_bad_goal_is_rejected_and_counted(graph):
+    params = RunSpec(paper_scenario("a"), "none").node_parameters()
+    ff = graph.add(
+        FeedforwardNode(
+            context=graph.context, parameter_overrides=_overrides(params["feedforward_node"])
+        )
+    )
+    helper = graph.add(rclpy.create_node("goal_sender", context=graph.context))
+    pub = helper.create_publisher(JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS)
+    graph.spin_until(lambda: pub.get_subscription_count() >= 1)
+    pub.publish(
+        JointTrajectory(
+            joint_names=["joint_1", "joint_2", "nope"],
+            points=[
+                JointTrajectoryPoint(positions=[0.0, 0.0, 0.0], time_from_start=Duration(sec=1))
+            ],
+        )
+    )
+    pub.publish(
+        JointTrajectory(
+            joint_names=list(ff.joint_names),
+            points=[
+                JointTrajectoryPoint(
+                    positions=[0.0, float("nan"), 0.0], time_from_start=Duration(sec=1)
+                )
+            ],
+        )
+    )
+    graph.spin_until(lambda: ff.diagnostics.counters.get("rejected", 0) == 2)
+    assert ff.diagnostics.counters.get("goals_accepted", 0) == 0
+
+
+def test_lockstep_missing_peer_ends_with_a_clear_error(graph):
+    """No feedback node: the lockstep plant gives up after its timeout instead of hanging."""
+    params = RunSpec(paper_scenario("a"), "none").node_parameters()
+    graph.add(
+        FeedforwardNode(
+            context=graph.context, parameter_overrides=_overrides(params["feedforward_node"])
+        )
+    )
+    plant_params = dict(params["plant_node"], wait_for_subscribers=1, lockstep_timeout_s=1.0)
+    plant = graph.add(
+        PlantNode(context=graph.context, parameter_overrides=_overrides(plant_params))
+    )
+    t0 = time.monotonic()
+    graph.spin_until(lambda: plant.done, timeout_s=10)
+    assert time.monotonic() - t0 < 3.0
+    assert plant.exit_code == 1
+    assert "no publisher on feedback/torque" in plant.diagnostics.message
+
+
+def test_lockstep_peer_dying_mid_run_ends_with_a_clear_error(graph):
+    params = RunSpec(paper_scenario("a", hold_s=5.0), "none").node_parameters()
+    ctx = graph.context
+    graph.add(
+        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+    )
+    fb = graph.add(
+        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+    )
+    plant_params = dict(params["plant_node"], wait_for_subscribers=2, lockstep_timeout_s=1.0)
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(plant_params)))
+    graph.spin_until(lambda: plant.k >= 20)
+    graph.executor.remove_node(fb)  # the feedback node stops answering
+    graph.spin_until(lambda: plant.done, timeout_s=10)
+    assert plant.exit_code == 1
+    assert "no feedback/torque for sample" in plant.diagnostics.message
+    assert plant.k < scenario_samples(params)
+
+
+def scenario_samples(params):
+    return params["plant_node"]["n_samples"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "parameter"),
+    [
+        (["feedback_node", "-p", "adaptive.rho:=1.5"], "adaptive.rho"),
+        (["feedback_node", "-p", "controller:=lqr"], "controller"),
+        (["plant_node", "-p", "step:=0.003"], "step"),
+        (["plant_node", "-p", "mode:=fast"], "mode"),
+        (
+            ["plant_node", "-p", "robot_description_path:=/nonexistent.urdf"],
+            "robot_description_path",
+        ),
+        (["feedforward_node", "-p", "inertia_error:=[0.1]"], "inertia_error"),
+        (["feedback_node", "-p", "adaptive.r:=0.0"], "adaptive.r"),
+    ],
+)
+def test_bad_parameter_stops_the_node_with_one_line(argv, parameter):
+    module = {
+        "feedback_node": "apc_feedback.node",
+        "feedforward_node": "apc_feedforward.node",
+        "plant_node": "apc_plant_sim.node",
+    }[argv[0]]
+    proc = subprocess.run(
+        [sys.executable, "-m", module, "--ros-args", *argv[1:]],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert f"'{parameter}'" in lines[0]
+
+
+@pytest.mark.slow
+def test_realtime_three_processes_tracks_within_twice_the_lockstep_error(tmp_path):
+    """Real time at T = 10 ms, three processes, case (c): within 2x of lockstep's max error.
+
+    Also checks that every node reports on /diagnostics (loop timing, compute time, counters).
+    """
+    scenario = paper_scenario("c", hold_s=0.5)
+    settings = paper_settings(1.5e5)
+    spec = RunSpec(scenario, "adaptive", settings, "realtime", name="realtime")
+    outcome = run_in_processes(spec, tmp_path, progress=False, timeout_s=120)
+    assert outcome.ok, outcome.message
+    recorded = load_run(outcome.path)
+    lockstep = run_offline(scenario, "adaptive", settings)
+    end = scenario.move_end_sample
+    max_rt = np.nanmax(np.abs(recorded.error[: end + 1]), axis=0)
+    max_ls = np.abs(lockstep.error[: end + 1]).max(axis=0)
+    assert np.all(max_rt <= 2.0 * max_ls), (np.rad2deg(max_rt), np.rad2deg(max_ls))
+    statuses = {}
+    for message in read_messages(outcome.path, topics=["/diagnostics"]):
+        for status in message.decode().status:
+            statuses[status.name] = {kv.key: kv.value for kv in status.values}
+    names = {name.rsplit("/", 1)[-1] for name in statuses}
+    assert {"plant_node", "feedforward_node", "feedback_node", "recorder"} - names <= {"recorder"}
+    plant = next(v for k, v in statuses.items() if k.endswith("plant_node"))
+    assert "period_median_us" in plant and "integrate_median_us" in plant
+    feedback = next(v for k, v in statuses.items() if k.endswith("feedback_node"))
+    assert "compute_median_us" in feedback and "trace_p" in feedback
