@@ -64,3 +64,41 @@ def test_lockstep_three_processes_equals_offline(tmp_path):
     offline = run_offline(scenario, "adaptive", settings)
     _compare(recorded, offline)
     _compare_identification(recorded, offline)
+
+
+def test_a_real_recording_opens_in_independent_readers(tmp_path):
+    """mcap with mcap_ros2's decoder, and rosbags (neither is ours), read every message of an experiment's MCAP."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    from apc_msgs_py.bag import bag_info
+
+    spec = RunSpec(paper_scenario("b", hold_s=0.0), "adaptive", paper_settings(), name="readers")
+    outcome = run_in_process(spec, tmp_path, progress=False, timeout_s=120)
+    assert outcome.ok, outcome.message
+    info = bag_info(outcome.path)
+    assert info["profile"] == "ros2" and info["complete"]
+    counts = {topic: t["message_count"] for topic, t in info["topics"].items()}
+    assert counts["/joint_states"] == counts["/feedback/torque"] == 101
+
+    recorded = load_run(outcome.path)
+    seen = {}
+    with open(outcome.path, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            seen[channel.topic] = seen.get(channel.topic, 0) + 1
+            if channel.topic == "/joint_states":
+                k = round((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) / 1e7)
+                np.testing.assert_array_equal(msg.position, recorded.q[k])
+    assert seen == {t: c for t, c in counts.items() if c}
+
+    with AnyReader([outcome.path]) as reader:
+        by_topic = {}
+        for connection, _, data in reader.messages():
+            msg = reader.deserialize(data, connection.msgtype)
+            by_topic[connection.topic] = by_topic.get(connection.topic, 0) + 1
+            if connection.topic == "/feedback/torque":
+                k = round((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) / 1e7)
+                np.testing.assert_array_equal(msg.effort, recorded.du[k])
+    assert by_topic == seen

@@ -1,0 +1,107 @@
+"""``analyze``: tracking metrics of recorded runs (MCAP), as a table or as JSON.
+
+Reads each recording (not in-memory results), aligns the signals by sample stamp and reports per
+joint: maximum tracking error (deg), the tip displacement it causes (mm), final error at the end
+of the move, maximum and last error over the hold after it, RMS error, peak and RMS torque, and
+the RLS residual (definitions: :mod:`apc_plant_sim.metrics`).
+
+    analyze runs/*.mcap
+    analyze --json runs/adaptive_alpha150000_2.268kg_lockstep.mcap
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from apc_msgs_py.bag import BagError
+from apc_msgs_py.nodeutil import resolve_config_path
+from apc_msgs_py.robot import Robot, RobotModelError, load_robot
+from apc_plant_sim.metrics import compute_metrics
+from apc_plant_sim.recording import RecordedRun, load_run
+
+
+def _robot_of(run: RecordedRun) -> Robot | None:
+    scenario = run.run.get("scenario", {})
+    urdf = scenario.get("urdf")
+    if not urdf:
+        return None
+    try:
+        return load_robot(
+            resolve_config_path(urdf),
+            gravity=scenario.get("gravity", 9.8062),
+            lock_joints=tuple(scenario.get("lock_joints", ())),
+        )
+    except RobotModelError:
+        return None
+
+
+def analyze_file(path: str | Path) -> dict[str, Any]:
+    """Metrics of one recording as a JSON-ready dict."""
+    run = load_run(path)
+    # joint_states(k).effort is the torque applied over [(k-1)T, kT): shift it back one row.
+    applied = np.vstack([run.effort[1:], np.full((1, len(run.joint_names)), np.nan)])
+    metrics = compute_metrics(
+        run.joint_names,
+        run.q,
+        run.q_d,
+        applied,
+        run.move_end_index,
+        robot=_robot_of(run),
+        residual_norm=run.residual_norm,
+    )
+    return {
+        "file": str(path),
+        "controller": run.run.get("controller"),
+        "mode": run.run.get("mode"),
+        "payload_kg": run.run.get("scenario", {}).get("payload_kg"),
+        "samples": len(run.t),
+        **metrics.as_dict(),
+    }
+
+
+def format_table(results: Sequence[dict[str, Any]]) -> str:
+    """A Markdown table: one row per run and joint."""
+    lines = [
+        "| run | joint | max err (deg) | max tip (mm) | final err (deg) | hold max (deg) "
+        "| RMS err (deg) | peak torque (N m) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        for i, joint in enumerate(r["joints"]):
+            lines.append(
+                f"| {Path(r['file']).stem} | {joint} | {r['max_error_deg'][i]:.3f} "
+                f"| {r['max_tip_mm'][i]:.2f} | {r['final_error_deg'][i]:.3f} "
+                f"| {r['hold_max_error_deg'][i]:.3f} | {r['rms_error_deg'][i]:.3f} "
+                f"| {r['peak_torque_nm'][i]:.1f} |"
+            )
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
+    parser.add_argument("recordings", nargs="+", help="MCAP files written by experiment/recorder")
+    parser.add_argument("--json", action="store_true", help="print {'runs': [...]} as JSON")
+    args = parser.parse_args(argv)
+    results = []
+    for path in args.recordings:
+        try:
+            results.append(analyze_file(path))
+        except (OSError, ValueError, BagError) as exc:
+            print(f"analyze: {path}: {exc}", file=sys.stderr)
+            return 2
+    if args.json:
+        print(json.dumps({"runs": results}, indent=1))
+    else:
+        print(format_table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
