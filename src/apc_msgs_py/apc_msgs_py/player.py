@@ -330,7 +330,8 @@ class PlayerNode(Node):
         try:
             info = bag_info(self.path)
         except BagError as exc:
-            raise ConfigError(f"parameter 'bag': {exc}") from None
+            where = "" if str(self.path) in str(exc) else f"{str(self.path)!r}: "
+            raise ConfigError(f"parameter 'bag': {where}{exc}") from None
 
         recorded = info["topics"]
         wanted = [self.resolve_topic_name(t, only_expand=True) for t in values["topics"]]

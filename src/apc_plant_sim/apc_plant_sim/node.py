@@ -385,7 +385,10 @@ class PlantNode(Node):
                 self.diagnostics.message = "ok"
             assert ff is not None
             self._step(ff[1] + du)
-        self.diagnostics.time("period", now - getattr(self, "_last_tick", now))
+        if hasattr(self, "_last_tick"):
+            period = now - self._last_tick
+            self.diagnostics.time("period", period)
+            self.diagnostics.time("jitter", abs(period - self.plant.config.period))
         self._last_tick = now
         self._publish_state()
         if self.n_samples and self.k >= self.n_samples:
