@@ -361,3 +361,19 @@ def test_reset_and_initial_state_checks(loaded3: Robot) -> None:
     # the returned arrays are copies: editing them does not touch the plant
     again.q[:] = 99.0
     assert not np.any(plant.q == 99.0)
+
+
+def test_set_robot_swaps_the_model_and_keeps_the_state() -> None:
+    """A payload picked up mid-run: same state, new dynamics from the next step on."""
+    robot = load_robot(URDF_3)
+    loaded = with_payload(robot, Payload(2.268, frame="wrist_center"))
+    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    a = Plant(robot, PlantConfig(), q0)
+    a.step(np.zeros(3))
+    q1 = a.q.copy()
+    a.set_robot(loaded)
+    np.testing.assert_array_equal(a.q, q1)
+    b = Plant(loaded, PlantConfig(), a.q, a.qd)
+    np.testing.assert_array_equal(a.step(np.ones(3)).q, b.step(np.ones(3)).q)
+    with pytest.raises(PlantError, match="set_robot"):
+        a.set_robot(load_robot(URDF_6))

@@ -121,6 +121,23 @@ class Plant:
     def n_joints(self) -> int:
         return self._n
 
+    def set_robot(self, robot: Robot) -> None:
+        """Swap the arm's model mid-run (e.g. a payload picked up), keeping the state.
+
+        Raises
+        ------
+        PlantError
+            The new model has other joints.
+        """
+        if robot.joint_names != self.robot.joint_names:
+            raise PlantError(
+                f"set_robot: joints {robot.joint_names} differ from {self.robot.joint_names}"
+            )
+        self.robot = robot
+        self._model = robot.model
+        self._data = robot.model.createData()
+        self._limit = robot.effort_limit.copy()
+
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
         """Put the arm at ``(q0, qd0)`` with time index 0."""
         self.q = self._vector(q0, "q0")
