@@ -23,7 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.linearize import SeriesForm, initial_model
-from apc_feedback.optimal import one_step_control, validate_weights
+from apc_feedback.optimal import one_step_control, receding_horizon_control, validate_weights
 from apc_feedback.rls import Rls, RlsConfig, RlsError
 
 
@@ -124,6 +124,20 @@ class AdaptiveConfig:
     identify_with : {"applied", "commanded"}
         Which ``du(k-1)`` enters the regressor ``z(k-1)``: the torque the plant reports it
         applied minus ``u_n(k-1)`` (right under saturation), or the commanded ``du(k-1)``.
+    horizon : int
+        Steps N of the optimal control over the identified model; 1 is the paper's one-step
+        law (Eq. 34), N > 1 the receding-horizon generalisation
+        (:func:`apc_feedback.optimal.receding_horizon_control`).
+    q_integral : float
+        Weight of the integrated position error ``ξ(k+1) = ξ(k) + T δq(k+1)`` added to the
+        state of the cost (integral action); 0 (default) = off, the paper's law.
+    integral_limit : float
+        Anti-windup bound on each ``|ξ_i|`` (rad s).
+    project_g : bool
+        Refuse an RLS update whose ``Ĝ`` velocity block (``≈ T D(q)⁻¹``, positive definite for
+        any arm) loses positive definiteness: a projection onto physically possible models.
+        A sudden disturbance (a payload picked up) otherwise lets one large-residual step flip
+        the sign of ``Ĝ`` and the law commands full torque the wrong way. Off in the paper.
     """
 
     period: float = 0.010
@@ -137,6 +151,10 @@ class AdaptiveConfig:
     control_form: Literal["exact", "printed"] = "exact"
     initial_model: SeriesForm = "corrected"
     identify_with: Literal["applied", "commanded"] = "applied"
+    horizon: int = 1
+    q_integral: float = 0.0
+    integral_limit: float = 0.05
+    project_g: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.period) and self.period > 0.0):
@@ -159,6 +177,12 @@ class AdaptiveConfig:
             raise FeedbackError(
                 f"identify_with must be 'applied' or 'commanded', got {self.identify_with!r}"
             )
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
+            raise FeedbackError(f"horizon must be an integer >= 1, got {self.horizon!r}")
+        if not (np.isfinite(self.q_integral) and self.q_integral >= 0.0):
+            raise FeedbackError(f"q_integral must be >= 0, got {self.q_integral}")
+        if not (np.isfinite(self.integral_limit) and self.integral_limit > 0.0):
+            raise FeedbackError(f"integral_limit must be > 0, got {self.integral_limit}")
         if not np.isfinite(self.trace_max):
             raise FeedbackError(f"trace_max must be finite, got {self.trace_max}")
         try:
@@ -199,6 +223,11 @@ class AdaptiveFeedback(FeedbackLaw):
        ``dx(k)``, where ``du(k-1)`` is the applied torque minus ``u_n(k-1)``;
     3. ``du(k) = -(R + ĜᵀQĜ)⁻¹ĜᵀQ(F̂ dx(k) + ŵ)`` (Eq. 35, exact minimiser of Eq. 34).
 
+    Within the same structure (identified model, optimal control of it) two extensions can be
+    switched on: a receding horizon of N steps (``horizon``) and integral action on the
+    position error (``q_integral``), which augments the identified model with
+    ``ξ(k+1) = ξ(k) + T C (F̂ dx + Ĝ du + ŵ)`` (C selects the position rows).
+
     Parameters
     ----------
     model : pinocchio.Model
@@ -219,14 +248,17 @@ class AdaptiveFeedback(FeedbackLaw):
         self.R = config.r * np.eye(n)
         validate_weights(self.Q, self.R, 2 * n, n)
         self.rls = Rls(n, config.rls_config(n))
+        self._Q_aug = np.diag(np.concatenate([np.diag(self.Q), np.full(n, config.q_integral)]))
         self.reset()
 
     def reset(self) -> None:
         self._started = False
         self.rejected_updates = 0
+        self.projected_updates = 0
         self._dx_prev = np.zeros(2 * self.n_joints)
         self._du_prev = np.zeros(self.n_joints)
         self._u_n_prev = np.zeros(self.n_joints)
+        self.integral = np.zeros(self.n_joints)
 
     def update(
         self,
@@ -258,21 +290,54 @@ class AdaptiveFeedback(FeedbackLaw):
             z = Rls.regressor(self._dx_prev, du_prev)
             try:
                 residual = self.rls.update(z, dx).residual
+                if self.config.project_g and not self._g_physical():
+                    # Unphysical Ĝ: take the step back and put the surprise in the bias ŵ.
+                    self.rls.undo()
+                    self.rls.shift_bias(residual)
+                    self.projected_updates += 1
             except RlsError:
                 # Keep controlling with the last good estimate; the node counts and reports it.
                 rejected = True
                 self.rejected_updates += 1
-        du = one_step_control(
-            self.rls.F,
-            self.rls.G,
-            self.rls.w,
-            self.Q,
-            self.R,
-            dx,
-            self.config.control_form,
-            check_weights=False,
-        )
+        du = self._control(dx)
         self._dx_prev = dx
         self._du_prev = du
         self._u_n_prev = np.array(u_n, dtype=float)
         return FeedbackOutput(du=du, residual=residual, trace_p=self.rls.trace_p, rejected=rejected)
+
+    def _g_physical(self) -> bool:
+        """The velocity block of Ĝ (≈ T D⁻¹) is positive definite."""
+        n = self.n_joints
+        block = self.rls.G[n:]
+        try:
+            np.linalg.cholesky(0.5 * (block + block.T))
+        except np.linalg.LinAlgError:
+            return False
+        return True
+
+    def _control(self, dx: np.ndarray) -> np.ndarray:
+        """Optimal control of the identified model (Eq. 35, or its extensions)."""
+        config = self.config
+        F, G, w = self.rls.F, self.rls.G, self.rls.w
+        if config.q_integral == 0.0:
+            if config.horizon == 1:
+                return one_step_control(
+                    F, G, w, self.Q, self.R, dx, config.control_form, check_weights=False
+                )
+            return receding_horizon_control(
+                F, G, w, self.Q, self.R, dx, config.horizon, check_weights=False
+            )
+        n, T = self.n_joints, config.period
+        limit = config.integral_limit
+        self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
+        # ξ(k+1) = ξ(k) + T δq(k+1), with δq(k+1) from the identified model's position rows.
+        Fa = np.zeros((3 * n, 3 * n))
+        Fa[: 2 * n, : 2 * n] = F
+        Fa[2 * n :, : 2 * n] = T * F[:n]
+        Fa[2 * n :, 2 * n :] = np.eye(n)
+        Ga = np.vstack([G, T * G[:n]])
+        wa = np.concatenate([w, T * w[:n]])
+        xa = np.concatenate([dx, self.integral])
+        return receding_horizon_control(
+            Fa, Ga, wa, self._Q_aug, self.R, xa, config.horizon, check_weights=False
+        )

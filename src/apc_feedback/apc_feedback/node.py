@@ -80,6 +80,21 @@ PARAMS: tuple[Param, ...] = (
         "applied",
         "du(k-1) in the regressor: 'applied' (joint_states effort - u_n) or 'commanded'",
     ),
+    Param(
+        "adaptive.horizon",
+        1,
+        "steps N of the optimal control over the identified model; 1 = the paper's Eq. 34",
+        1,
+        200,
+    ),
+    Param(
+        "adaptive.q_integral",
+        0.0,
+        "weight of the integrated position error (integral action); 0 = off (the paper)",
+        0.0,
+        1e15,
+    ),
+    Param("adaptive.integral_limit", 0.05, "anti-windup bound on the integral (rad s)", 1e-9, 1e3),
     Param("gains.kp", 100.0, "Kp of computed torque (1/s^2) or PD (N m/rad)", 0.0, 1e9),
     Param("gains.kv", 20.0, "Kv of computed torque (1/s) or PD (N m s/rad)", 0.0, 1e9),
 )

@@ -32,6 +32,7 @@ __all__ = [
     "one_step_control",
     "one_step_cost",
     "one_step_gain",
+    "receding_horizon_control",
     "validate_weights",
 ]
 
@@ -302,3 +303,61 @@ def one_step_cost(F: Any, G: Any, w: Any, Q: Any, R: Any, x: Any, u: Any) -> flo
     Qa, Ra = validate_weights(Q, R, p, n)
     x_next = Fa @ xa + Ga @ ua + wa
     return 0.5 * float(x_next @ Qa @ x_next + ua @ Ra @ ua)
+
+
+def receding_horizon_control(
+    F: Any,
+    G: Any,
+    w: Any,
+    Q: Any,
+    R: Any,
+    x: Any,
+    horizon: int,
+    *,
+    check_weights: bool = True,
+) -> np.ndarray:
+    """First input of the N-step optimal control of the identified affine model.
+
+    Minimises ``J = ½ Σ_{i=1..N} x(k+i)ᵀ Q x(k+i) + ½ Σ_{i=0..N-1} u(k+i)ᵀ R u(k+i)``
+    subject to Eq. 16, ``x(i+1) = F x(i) + G u(i) + w``, with ``F, G, w`` frozen at their
+    current estimates (the certainty-equivalence receding horizon), and returns ``u(k)``.
+    The bias is carried by augmenting the state with a constant 1,
+    ``s = (x, 1)``, ``A = [[F, w], [0, 1]]``, ``B = [[G], [0]]``, ``Q̃ = diag(Q, 0)``, and the
+    backward Riccati recursion ``P_N = Q̃``,
+    ``P_i = Q̃ + Aᵀ P_{i+1} A − Aᵀ P_{i+1} B (R + Bᵀ P_{i+1} B)⁻¹ Bᵀ P_{i+1} A``
+    gives ``u(k) = −(R + Bᵀ P_1 B)⁻¹ Bᵀ P_1 A s(k)``. With ``horizon = 1`` this is exactly the
+    one-step law of Eq. 35 (corrected): the paper's structure, looking further ahead.
+
+    Parameters
+    ----------
+    F : (p, p), G : (p, n), w : (p,), Q : (p, p), R : (n, n), x : (p,)
+    horizon : int
+        N >= 1 steps.
+
+    Returns
+    -------
+    (n,) ndarray
+    """
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+        raise ControlError(f"horizon must be an integer >= 1, got {horizon!r}")
+    F, G, p, n = _model(F, G)
+    w = _array("w", w, (p,))
+    x = _array("x", x, (p,))
+    Q, R = _weights(Q, R, p, n, check_weights)
+    A = np.zeros((p + 1, p + 1))
+    A[:p, :p] = F
+    A[:p, p] = w
+    A[p, p] = 1.0
+    B = np.zeros((p + 1, n))
+    B[:p] = G
+    Qt = np.zeros((p + 1, p + 1))
+    Qt[:p, :p] = Q
+    P = Qt
+    for _ in range(horizon - 1):
+        PB = P @ B
+        K = _solve_spd(R + B.T @ PB, PB.T @ A)
+        P = Qt + A.T @ P @ A - (A.T @ PB) @ K
+        P = 0.5 * (P + P.T)
+    PB = P @ B
+    s = np.append(x, 1.0)
+    return -_solve_spd(R + B.T @ PB, PB.T @ (A @ s))

@@ -339,6 +339,33 @@ class Rls:
         self._theta[...] = self._theta0
         self._P[...] = self._P0
         self._k = 0
+        self._can_undo = False
+
+    def shift_bias(self, delta: np.ndarray) -> None:
+        """Add ``delta`` (p,) to ŵ, leaving F̂, Ĝ and P as they are.
+
+        Used after :meth:`undo` when an update was refused as unphysical: the residual is then
+        explained as a change of the bias (a disturbance), which is what it usually is.
+        """
+        delta = _vector("delta", delta, self._p)
+        self._theta[self._p + self._n] += delta
+        self._can_undo = False
+
+    def undo(self) -> None:
+        """Take back the last :meth:`update` (Θ, P and the count), e.g. when a projection
+        onto physically possible parameters refuses its result.
+
+        Raises
+        ------
+        RlsError
+            If there is no update to take back (only the last one can be).
+        """
+        if not getattr(self, "_can_undo", False):
+            raise RlsError("undo: no update to take back")
+        self._theta, self._theta_spare = self._theta_spare, self._theta
+        self._P, self._P_spare = self._P_spare, self._P
+        self._k -= 1
+        self._can_undo = False
 
     def update(self, z: np.ndarray, dx_next: np.ndarray) -> RlsStep:
         """Fold one sample into the estimate (Eqs. 26, 29, 30 corrected or printed, 31).
@@ -371,6 +398,7 @@ class Rls:
         self._theta_spare, self._theta = self._theta, theta_new
         self._P_spare, self._P = self._P, P_new
         self._k += 1
+        self._can_undo = True
         return RlsStep(residual=self._e.copy(), gamma=gamma, trace_p=trace_p, clipped=clipped)
 
     def _candidate(

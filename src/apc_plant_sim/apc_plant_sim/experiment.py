@@ -75,7 +75,7 @@ class RunSpec:
         }
         prefix = "adaptive." if self.controller == "adaptive" else "gains."
         for key, value in (self.settings or {}).items():
-            feedback[prefix + key] = value if isinstance(value, str) else float(value)
+            feedback[prefix + key] = value if isinstance(value, (str, int)) else float(value)
         plant = {
             **shared,
             "step": float(sc.step),
@@ -83,6 +83,7 @@ class RunSpec:
             "payload.mass_kg": float(sc.payload_kg),
             "payload.frame": sc.payload_frame or "",
             "payload.com_m": [float(v) for v in sc.payload_com_m],
+            "payload.at_s": float(sc.payload_at_s),
             "q_initial_deg": [float(v) for v in sc.q_start_deg],
             "n_samples": int(sc.n_samples),
             "wait_for_subscribers": 3,

@@ -64,6 +64,13 @@ PARAMS: tuple[Param, ...] = (
     Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
     Param("payload.frame", "", "frame carrying the payload; empty = body of the last joint"),
     Param("payload.com_m", [0.0, 0.0, 0.0], "payload centre of mass in payload.frame (m)"),
+    Param(
+        "payload.at_s",
+        0.0,
+        "time (s, sample time) the payload appears, picked up mid-motion; 0 = from the start",
+        0.0,
+        1e9,
+    ),
     Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
     Param("enforce_torque_limits", True, "clip |tau| to the URDF effort limits"),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
@@ -142,7 +149,15 @@ class PlantNode(Node):
         q0 = values["q_initial_deg"] or [0.0] * n
         if len(q0) != n:
             raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
-        self.plant = Plant(plant_robot, config, np.deg2rad(q0))
+        # A payload picked up at payload.at_s: the arm starts without it.
+        self._pickup_k = (
+            round(values["payload.at_s"] / config.period)
+            if payload.mass_kg > 0.0 and values["payload.at_s"] > 0.0
+            else 0
+        )
+        self._loaded_robot = plant_robot
+        initial = robot if self._pickup_k else plant_robot
+        self.plant = Plant(initial, config, np.deg2rad(q0))
         self.period_ns = wire.seconds_to_ns(config.period)
         self.n_samples = values["n_samples"]
         self._values = values
@@ -318,6 +333,9 @@ class PlantNode(Node):
         self._publish_state()
 
     def _step(self, tau: np.ndarray) -> None:
+        if self._pickup_k and self.k == self._pickup_k:
+            self.plant.set_robot(self._loaded_robot)
+            self.get_logger().info(f"sample {self.k}: payload picked up")
         with Stopwatch(self.diagnostics, "integrate"):
             try:
                 result = self.plant.step(tau)

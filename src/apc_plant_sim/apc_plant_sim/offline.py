@@ -13,12 +13,14 @@ structure): the feedback reads ``u_n(k)`` only through the set point.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from apc_feedback.controller import FeedbackLaw
 from apc_feedforward.nominal import Feedforward
+from apc_msgs_py.robot import Robot
 from apc_plant_sim.plant import Plant
 
 
@@ -82,6 +84,7 @@ def run_closed_loop(
     n_samples: int,
     *,
     record_parameters: bool = True,
+    plant_changes: Mapping[int, Robot] | None = None,
 ) -> RunResult:
     """Run ``n_samples`` sampling periods of the closed loop from the plant's current state.
 
@@ -97,6 +100,9 @@ def run_closed_loop(
         Number of periods integrated; the result has ``n_samples + 1`` rows.
     record_parameters : bool
         Keep the identified ``F, G, w`` of an adaptive law at every sample.
+    plant_changes : mapping of sample index to Robot, optional
+        The true arm changes at these samples (e.g. a payload picked up mid-motion); the new
+        model integrates the period starting at that sample.
 
     Returns
     -------
@@ -137,6 +143,8 @@ def run_closed_loop(
             residual_norm[i] = float(np.linalg.norm(fb.residual))
         if rls is not None:
             F[i], G[i], w[i] = rls.F, rls.G, rls.w
+        if plant_changes and k in plant_changes:
+            plant.set_robot(plant_changes[k])
         if i < n_samples:
             step = plant.step(tau)
             applied_prev = step.applied

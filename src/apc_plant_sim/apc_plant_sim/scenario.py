@@ -66,6 +66,8 @@ class Scenario:
         Frame carrying the payload (``None``: body of the last joint).
     payload_com_m : 3 floats
         Payload centre of mass in ``payload_frame`` (m).
+    payload_at_s : float
+        Time the payload appears on the plant (picked up mid-motion); 0 = from the start.
     inertia_error : n floats
         Relative error of the controller's link inertia tensors (paper: +-10 %).
     q_start_deg, q_goal_deg : n floats
@@ -86,6 +88,7 @@ class Scenario:
     payload_kg: float = 0.0
     payload_frame: str | None = "wrist_center"
     payload_com_m: tuple[float, ...] = (0.0, 0.0, 0.0)
+    payload_at_s: float = 0.0
     inertia_error: tuple[float, ...] = (0.1, -0.1, 0.1)
     q_start_deg: tuple[float, ...] = (0.0, -45.0, -45.0)
     q_goal_deg: tuple[float, ...] = (90.0, 45.0, -135.0)
@@ -137,6 +140,7 @@ class Built:
 
     plant_robot: Robot
     controller_robot: Robot
+    unloaded_robot: Robot
     trajectory: FourThreeFour
     plant_config: PlantConfig
 
@@ -165,7 +169,7 @@ def build(scenario: Scenario) -> Built:
         set_down=scenario.set_down,
     )
     plant_config = PlantConfig(period=scenario.period, step=scenario.step)
-    return Built(plant_robot, controller_robot, trajectory, plant_config)
+    return Built(plant_robot, controller_robot, robot, trajectory, plant_config)
 
 
 def make_feedback(
@@ -201,16 +205,29 @@ def run_offline(
     """Build the scenario and run the closed loop without ROS."""
     built = build(scenario)
     q0, qd0, _ = built.trajectory.sample(0.0)
-    plant = Plant(built.plant_robot, built.plant_config, q0, qd0)
+    pickup = payload_pickup_sample(scenario)
+    initial = built.unloaded_robot if pickup else built.plant_robot
+    plant = Plant(initial, built.plant_config, q0, qd0)
     feedforward = Feedforward(built.controller_robot.model, built.trajectory, scenario.period)
     feedback = make_feedback(controller, built.controller_robot, scenario.period, params)
     result = run_closed_loop(
-        plant, feedforward, feedback, scenario.n_samples if n_samples is None else n_samples
+        plant,
+        feedforward,
+        feedback,
+        scenario.n_samples if n_samples is None else n_samples,
+        plant_changes={pickup: built.plant_robot} if pickup else None,
     )
     result.meta.update(
         controller=controller, payload_kg=scenario.payload_kg, params=dict(params or {})
     )
     return result
+
+
+def payload_pickup_sample(scenario: Scenario) -> int:
+    """Sample at which the payload appears on the plant (0: there from the start)."""
+    if scenario.payload_kg == 0.0 or scenario.payload_at_s <= 0.0:
+        return 0
+    return round(scenario.payload_at_s / scenario.period)
 
 
 def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
@@ -227,6 +244,34 @@ def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "alpha": alpha,
         "trace_max": -1.0,
     }
+
+
+def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """Within the paper's structure, what the measurements recommend (bench/preset_sweep.py).
+
+    Same RLS-identified perturbation model and optimal control of it, same feedforward, with
+    changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
+    with Q = 0.1 I weighs next-step position ~ (T/2)^2 as much as velocity, so a payload's
+    gravity builds up as position error), a 3-step receding horizon over the identified model,
+    integral action on the position error, the RLS wind-up guard, and a projection that keeps
+    Ĝ's velocity block (≈ T D⁻¹) positive definite, putting an unexplained jump into ŵ (a
+    payload picked up mid-motion otherwise flips Ĝ and the law saturates).
+    """
+    return {
+        "q_position": 2000.0,
+        "q_velocity": 1.0,
+        "r": 1e-6,
+        "rho": 0.95,
+        "alpha": alpha,
+        "trace_max": 0.0,
+        "horizon": 3,
+        "q_integral": 1e6,
+        "integral_limit": 0.05,
+        "project_g": True,
+    }
+
+
+PRESETS = {"paper": paper_settings, "recommended": recommended_settings}
 
 
 def joint_sign_to_paper(n: int) -> np.ndarray:
