@@ -12,7 +12,12 @@ import pytest
 
 from apc_plant_sim.experiment import RunSpec, run_in_process, run_in_processes
 from apc_plant_sim.recording import load_run
-from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+from apc_plant_sim.scenario import (
+    paper_scenario,
+    paper_settings,
+    recommended_settings,
+    run_offline,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -39,7 +44,11 @@ def _compare_identification(recorded, offline) -> None:
 
 @pytest.mark.parametrize(
     ("case", "controller", "settings"),
-    [("c", "adaptive", paper_settings(1.5e5)), ("b", "computed_torque", None)],
+    [
+        ("c", "adaptive", paper_settings(1.5e5)),
+        ("c", "adaptive", recommended_settings(1500.0)),
+        ("b", "computed_torque", None),
+    ],
 )
 def test_lockstep_one_process_equals_offline(tmp_path, case, controller, settings):
     scenario = paper_scenario(case, hold_s=0.2)

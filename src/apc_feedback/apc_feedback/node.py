@@ -95,6 +95,11 @@ PARAMS: tuple[Param, ...] = (
         1e15,
     ),
     Param("adaptive.integral_limit", 0.05, "anti-windup bound on the integral (rad s)", 1e-9, 1e3),
+    Param(
+        "adaptive.project_g",
+        False,
+        "refuse RLS steps that make G's velocity block (~T D^-1) indefinite; put the jump in w",
+    ),
     Param("gains.kp", 100.0, "Kp of computed torque (1/s^2) or PD (N m/rad)", 0.0, 1e9),
     Param("gains.kv", 20.0, "Kv of computed torque (1/s) or PD (N m s/rad)", 0.0, 1e9),
 )

@@ -6,7 +6,7 @@ the move and its hold; writes ``<out>/<run>.mcap``; prints progress and a one-li
 exits non-zero on failure. Defaults are the paper's: 3-joint PUMA 560, the 4-3-4 move of its
 simulation study, +-10 % inertia error in the controllers, lockstep timing.
 
-    experiment --case c --controller adaptive --alpha 150000 --out runs
+    experiment --case c --controller adaptive --preset recommended --alpha 150000 --out runs
     experiment --case a --controller computed_torque --mode realtime --processes
 """
 
@@ -33,9 +33,9 @@ from apc_msgs_py.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
     PAPER_CASES,
+    PRESETS,
     Scenario,
     paper_scenario,
-    paper_settings,
 )
 
 
@@ -74,7 +74,13 @@ class RunSpec:
             "controller": self.controller,
         }
         prefix = "adaptive." if self.controller == "adaptive" else "gains."
+        from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
+
+        declared = {p.name for p in FEEDBACK_PARAMS}
         for key, value in (self.settings or {}).items():
+            if prefix + key not in declared:
+                # An override of an undeclared parameter would be dropped silently by rclpy.
+                raise ValueError(f"setting '{key}' is not a parameter of feedback_node")
             feedback[prefix + key] = value if isinstance(value, (str, int)) else float(value)
         plant = {
             **shared,
@@ -367,7 +373,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--alpha", type=float, default=1.5e5, help="P(0) = alpha I (paper: 1500, 150000)"
     )
+    parser.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default="paper",
+        help="adaptive settings: the paper's printed ones, or the measured fix (README)",
+    )
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    parser.add_argument(
+        "--payload-at", type=float, default=0.0, help="payload appears at this time (s)"
+    )
     parser.add_argument("--urdf", help="arm URDF (default: the 3-joint PUMA 560)")
     parser.add_argument("--payload", type=float, help="payload mass (kg); overrides --case")
     parser.add_argument("--hold", type=float, default=0.5, help="hold after the move (s)")
@@ -393,10 +408,14 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         from dataclasses import replace
 
         scenario = replace(scenario, payload_kg=args.payload)
-    settings = paper_settings(args.alpha) if args.controller == "adaptive" else None
+    if args.payload_at:
+        from dataclasses import replace
+
+        scenario = replace(scenario, payload_at_s=args.payload_at)
+    settings = PRESETS[args.preset](args.alpha) if args.controller == "adaptive" else None
     name = args.name or (
         f"{args.controller}"
-        + (f"_alpha{args.alpha:g}" if args.controller == "adaptive" else "")
+        + (f"_{args.preset}_alpha{args.alpha:g}" if args.controller == "adaptive" else "")
         + f"_{scenario.payload_kg:.3f}kg_{args.mode}"
     )
     return RunSpec(scenario, args.controller, settings, args.mode, name)
