@@ -76,7 +76,7 @@ def test_lockstep_three_processes_equals_offline(tmp_path):
 
 
 def test_a_real_recording_opens_in_independent_readers(tmp_path):
-    """mcap with mcap_ros2's decoder, and rosbags (neither is ours), read every message of an experiment's MCAP."""
+    """mcap with mcap_ros2's decoder, and rosbags (neither is ours), read every message."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader

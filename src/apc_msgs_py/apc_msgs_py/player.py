@@ -123,7 +123,8 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "wait_for_subscribers",
         0,
-        "before playing, wait until every publisher has matched this many subscribers",
+        "before playing, wait until every playing publisher (not /clock) has matched this "
+        "many subscribers",
         0,
         1_000_000,
     ),
@@ -244,8 +245,9 @@ def parse_remaps(items: Sequence[str]) -> list[tuple[str, str]]:
 class PlayerNode(Node):
     """Composable bag player (see module docstring).
 
-    Keyword arguments that are not ``None`` override the ROS parameter of the same name (they
-    are passed as parameter overrides, so ``ros2 param get`` shows what is used).
+    Keyword arguments that are not ``None`` (or an empty list) override the ROS parameter of
+    the same name (they are passed as parameter overrides, so ``ros2 param get`` shows what is
+    used).
 
     Parameters
     ----------
@@ -318,10 +320,18 @@ class PlayerNode(Node):
             ),
         }
         overrides = list(kwargs.pop("parameter_overrides", None) or [])
-        # Later overrides win; an empty list cannot be typed by rclpy and is the default anyway.
+        # Later overrides win. rclpy retypes an empty list override as a byte array, so an empty
+        # list leaves the parameter as it is (its default is empty anyway).
         overrides += [Parameter(k, value=v) for k, v in given.items() if v is not None and v != []]
         super().__init__(node_name, parameter_overrides=overrides, **kwargs)
-        values = declare(self, PARAMS)
+        try:
+            self._setup(declare(self, PARAMS))
+        except ConfigError:
+            self.destroy_node()  # nothing half-built stays on the graph
+            raise
+
+    def _setup(self, values: dict[str, Any]) -> None:
+        """Open the bag, create the publishers and timers (see :class:`PlayerNode`)."""
         self.rate = float(values["rate"])
         self.loop = bool(values["loop"])
         self.clock_hz = float(values["clock_hz"])
@@ -511,6 +521,7 @@ class PlayerNode(Node):
     def close(self) -> None:
         """Stop playing and close the bag (idempotent); the node can then be destroyed."""
         if not self.done:
+            self.get_logger().info(f"stopped after {sum(self.published.values())} messages")
             self._finish()
 
 
