@@ -238,8 +238,16 @@ def run_node(
             return 2
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception:
+                # A signal between ok() and spin_once() invalidates the context: that is a
+                # shutdown, not an error. Anything else is re-raised.
+                if rclpy.ok():
+                    raise
+                break
             if spin_until is not None and spin_until(node):
                 code = getattr(node, "exit_code", 0)
                 break
