@@ -31,7 +31,7 @@ lint: setup
 	$(VENV)/bin/ruff format --check src test bench tools
 
 run: setup
-	$(VENV)/bin/experiment --case c --controller adaptive --out runs
+	$(PY) -m apc_plant_sim.reproduce --out runs
 
 bench: setup
 	$(PY) bench/run_all.py
