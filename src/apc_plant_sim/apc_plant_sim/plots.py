@@ -139,12 +139,14 @@ def _mark_times(axes: Iterable[Axes], times: Iterable[float], style: dict, label
 def _figure_legend(fig: Figure, ax: Axes) -> None:
     """One legend for the figure, below the panels (hides no line), from ``ax``'s artists.
 
-    Up to five entries go on one row, more on two rows.
+    Up to four entries (or five short ones) go on one row, more on two rows, so a long
+    label is not cut at the figure's edge.
     """
     handles, labels = ax.get_legend_handles_labels()
     if not handles:
         return
-    ncols = len(handles) if len(handles) <= 5 else -(-len(handles) // 2)
+    one_row = len(handles) <= 4 or (len(handles) == 5 and sum(map(len, labels)) <= 90)
+    ncols = len(handles) if one_row else -(-len(handles) // 2)
     fig.legend(handles, labels, loc="outside lower center", ncols=ncols, frameon=False)
 
 
