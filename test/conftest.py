@@ -9,7 +9,7 @@ import pytest
 
 # Set before any rclpy context is created (contexts read the environment at init), so tests that
 # run nodes never see another run's traffic and never leave this machine.
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 

@@ -30,16 +30,17 @@ Options
     Publish ``/clock`` at HZ wall-clock hertz (default 40, as ``ros2 bag play --clock``) with
     the bag time of the playback: the window start while waiting, then
     ``window_start + rate * (wall time since start)``, or, at ``--rate 0``, the log time of the
-    last message sent.
+    last message sent. Put it after BAG (``player --clock BAG`` would read BAG as HZ).
 ``--start S`` / ``--duration D``
     Play the log-time window ``[first + S, first + S + D)`` (seconds after the bag's first log
     time; the end is excluded, as in mcap). ``D = 0``: to the end of the bag.
 ``--remap FROM:=TO ...``
     Publish the recorded topic FROM on TO. ``--ros-args -r FROM:=TO`` works too (rcl remapping
-    of the publishers), as do ``-r __ns:=/ns`` and ``-p name:=value`` for every option below.
+    of the publishers), as do ``-r __ns:=/ns`` and ``-p name:=value`` (parameters below).
 ``--wait-for-subscribers N``
-    Before the first message, wait until every playing publisher has matched N subscribers
-    (default 0), so that nothing is lost on VOLATILE topics while discovery finishes.
+    Before the first message, wait until the publisher of every played topic that holds
+    messages has matched N subscribers (default 0), so that nothing is lost on VOLATILE topics
+    while discovery finishes. ``/clock`` is not waited for.
 
 Every option is also a ROS parameter of the node (``bag``, ``rate``, ``topics``, ``loop``,
 ``clock_hz``, ``start``, ``duration``, ``remap``, ``wait_for_subscribers``), so a
@@ -123,8 +124,8 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "wait_for_subscribers",
         0,
-        "before playing, wait until every playing publisher (not /clock) has matched this "
-        "many subscribers",
+        "before playing, wait until the publisher of every played topic that has messages "
+        "(not /clock) has matched this many subscribers",
         0,
         1_000_000,
     ),
@@ -378,6 +379,8 @@ class PlayerNode(Node):
             pub = self.create_publisher(msg_type, remaps.get(name, name), qos)
             self.played[name] = PlayedTopic(name, pub.topic_name, type_name, qos, pub)
         self.published = dict.fromkeys(self.played, 0)
+        # Only topics with messages are waited for (a goal topic recorded empty has no reader).
+        self._with_messages = [t for t in self.played if recorded[t]["message_count"] > 0]
 
         first = info["start_ns"]
         start_ns = (first or 0) + wire.seconds_to_ns(values["start"])
@@ -421,9 +424,7 @@ class PlayerNode(Node):
     def bag_time_ns(self) -> int:
         """Current playback time on the bag's time line (ns), what ``--clock`` publishes."""
         start_ns = self.window_ns[0]
-        if self._t0 is None:
-            return start_ns if self._last_sent_ns is None else self._last_sent_ns
-        if self.rate == 0:
+        if self._t0 is None or self.rate == 0:
             return start_ns if self._last_sent_ns is None else self._last_sent_ns
         now = start_ns + int((time.monotonic_ns() - self._t0) * self.rate)
         end_ns = self.window_ns[1]
@@ -434,10 +435,15 @@ class PlayerNode(Node):
             self._clock_pub.publish(ClockMsg(clock=wire.ns_to_stamp(self.bag_time_ns())))
 
     def _subscribers_ready(self) -> bool:
-        if all(p.publisher.get_subscription_count() >= self.wait_for for p in self.played.values()):
+        waiting = [
+            name
+            for name in self._with_messages
+            if self.played[name].publisher.get_subscription_count() < self.wait_for
+        ]
+        if not waiting:
             return True
         self.get_logger().info(
-            f"waiting for {self.wait_for} subscriber(s) on each of {sorted(self.played)} "
+            f"waiting for {self.wait_for} subscriber(s) on each of {waiting} "
             f"({time.monotonic() - self._waited_since:.0f} s)",
             throttle_duration_sec=5.0,
         )

@@ -1,0 +1,299 @@
+"""The player replays a recorded run: a fresh feedback node fed the recorded inputs answers with
+the recorded torques, bit for bit; plus the window, rate, clock and command-line behaviour."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from apc_feedback.node import FeedbackNode
+from apc_msgs_py import wire
+from apc_msgs_py.bag import read_messages
+from apc_msgs_py.player import PlayerNode, main
+from apc_plant_sim.experiment import RunSpec, run_in_process
+from apc_plant_sim.scenario import paper_scenario, paper_settings
+
+pytestmark = pytest.mark.ros
+
+JS = "/" + wire.JOINT_STATES
+SP = "/" + wire.SETPOINT
+FB = "/" + wire.FEEDBACK_TORQUE
+MS = 1_000_000
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> tuple[RunSpec, Path]:
+    """One lockstep run of the adaptive law (case c, 0.1 s hold: 111 samples, 0 .. 1.10 s)."""
+    spec = RunSpec(
+        paper_scenario("c", hold_s=0.1),
+        "adaptive",
+        paper_settings(1.5e5),
+        "lockstep",
+        name="adaptive_c",
+    )
+    outcome = run_in_process(spec, tmp_path_factory.mktemp("run"), progress=False, timeout_s=60)
+    assert outcome.ok, outcome.message
+    for topic in (JS, SP, FB):
+        stamps = [
+            wire.stamp_to_ns(m.decode().header.stamp) for m in read_messages(outcome.path, topic)
+        ]
+        assert len(stamps) == len(set(stamps)), (
+            f"{topic} recorded twice for some stamps: another process on "
+            f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')} took part in the run"
+        )
+    return spec, outcome.path
+
+
+@pytest.fixture
+def ros() -> Iterator[tuple[rclpy.Context, list[Node]]]:
+    """A fresh context and a list of nodes destroyed (closed first, if they can) at the end."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    nodes: list[Node] = []
+    try:
+        yield ctx, nodes
+    finally:
+        for node in reversed(nodes):
+            closer = getattr(node, "close", None)
+            if callable(closer):
+                closer()
+            node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+class Collector(Node):
+    """Keeps every message of one topic with its arrival time (monotonic s)."""
+
+    def __init__(self, ctx: rclpy.Context, msg_type: type, topic: str, qos, **kwargs) -> None:
+        super().__init__("collector", context=ctx, **kwargs)
+        self.messages: list = []
+        self.arrivals: list[float] = []
+        self.sub = self.create_subscription(msg_type, topic, self._on_message, qos)
+
+    def _on_message(self, msg) -> None:
+        self.messages.append(msg)
+        self.arrivals.append(time.monotonic())
+
+
+def spin_until(
+    ctx: rclpy.Context, nodes: list[Node], done: Callable[[], bool], timeout_s: float
+) -> bool:
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in nodes:
+        executor.add_node(node)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while not done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.01)
+        return done()
+    finally:
+        executor.shutdown()
+
+
+def assert_alone(node: Node, publishers: dict[str, int]) -> None:
+    """Fail clearly if another process on this ROS domain publishes on the test's topics.
+
+    A feedback node of another process would answer the player too, and a plant would feed
+    the feedback node: the values would differ for a reason that has nothing to do with the
+    player.
+    """
+    for topic, count in publishers.items():
+        found = [
+            p.node_namespace.rstrip("/") + "/" + p.node_name
+            for p in node.get_publishers_info_by_topic(topic)
+        ]
+        assert len(found) == count, (
+            f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')} is shared with another process: "
+            f"{found} publish {topic}, expected {count}"
+        )
+
+
+def stamps_ns(messages) -> list[int]:
+    return [wire.stamp_to_ns(m.header.stamp) for m in messages]
+
+
+def test_replay_into_fresh_feedback_gives_recorded_torques_exactly(recorded, ros):
+    spec, path = recorded
+    ctx, nodes = ros
+    expected = {
+        wire.stamp_to_ns(msg.header.stamp): msg
+        for msg in (m.decode() for m in read_messages(path, FB))
+    }
+    n_states = sum(1 for _ in read_messages(path, JS))
+    assert len(expected) == n_states > 100
+
+    overrides = [Parameter(k, value=v) for k, v in spec.node_parameters()["feedback_node"].items()]
+    feedback = FeedbackNode(context=ctx, parameter_overrides=overrides)
+    nodes.append(feedback)
+    collector = Collector(ctx, JointState, wire.FEEDBACK_TORQUE, wire.CONTROL_QOS)
+    nodes.append(collector)
+    # The first torque must not be lost either: wait for feedback -> collector to match.
+    assert spin_until(ctx, nodes, lambda: feedback.torque_pub.get_subscription_count() >= 1, 10)
+    player = PlayerNode(context=ctx, bag=path, topics=[JS, SP], rate=5.0, wait_for_subscribers=1)
+    nodes.append(player)
+    assert {t.recorded: t.published for t in player.played.values()} == {JS: JS, SP: SP}
+
+    ok = spin_until(
+        ctx, nodes, lambda: player.done and len(collector.messages) >= len(expected), 20
+    )
+    assert ok, f"player done: {player.done}, torques: {len(collector.messages)}/{len(expected)}"
+    assert player.published == {JS: n_states, SP: n_states}
+    assert_alone(collector, {JS: 1, SP: 1, FB: 1})
+    assert feedback.diagnostics.counters == {"samples": n_states}
+    got = {wire.stamp_to_ns(m.header.stamp): m for m in collector.messages}
+    assert len(collector.messages) == len(got) == len(expected)
+    assert sorted(got) == sorted(expected)
+    for stamp, msg in expected.items():
+        assert list(got[stamp].name) == list(msg.name)
+        np.testing.assert_array_equal(
+            np.array(got[stamp].effort), np.array(msg.effort), err_msg=f"stamp {stamp} ns"
+        )
+
+
+def test_window_selects_messages_by_log_time(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    collector = Collector(ctx, JointState, wire.JOINT_STATES, wire.CONTROL_QOS)
+    nodes.append(collector)
+    player = PlayerNode(
+        context=ctx, bag=path, topics=["joint_states"], start=0.2, duration=0.3, rate=0.0,
+        wait_for_subscribers=1,
+    )  # fmt: skip
+    nodes.append(player)
+    assert spin_until(ctx, nodes, lambda: player.done and len(collector.messages) >= 30, 10)
+    spin_until(ctx, nodes, lambda: False, 0.1)  # nothing more arrives
+    # [0.2 s, 0.5 s), end excluded: samples 20 .. 49.
+    assert stamps_ns(collector.messages) == [k * 10 * MS for k in range(20, 50)]
+    assert player.published == {JS: 30}
+
+
+def test_default_topics_leave_out_clock_and_diagnostics(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    player = PlayerNode(context=ctx, bag=path, duration=0.001)
+    nodes.append(player)
+    assert set(player.played) == {
+        "/" + s.name for s in wire.TOPICS if s.name not in (wire.CLOCK, wire.DIAGNOSTICS)
+    }
+    assert spin_until(ctx, nodes, lambda: player.done, 5)
+    # The first sample of every recorded topic (the goal topic holds no message).
+    assert sum(player.published.values()) == 5
+
+
+def test_rate_two_takes_half_the_wall_time(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    walls = {}
+    for rate in (1.0, 2.0):
+        player = PlayerNode(
+            f"player_{int(rate)}", context=ctx, bag=path, topics=[JS], duration=0.6, rate=rate
+        )
+        nodes.append(player)
+        assert spin_until(ctx, [player], lambda p=player: p.done, 5)
+        assert player.published == {JS: 60}
+        walls[rate] = player.pass_wall_s
+    assert 0.55 <= walls[1.0] <= 0.8, walls  # last message at 0.59 s of bag time
+    assert 1.5 <= walls[1.0] / walls[2.0] <= 3.0, walls
+
+
+def test_loop_starts_over(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    collector = Collector(ctx, JointState, wire.JOINT_STATES, wire.CONTROL_QOS)
+    nodes.append(collector)
+    player = PlayerNode(
+        context=ctx, bag=path, topics=[JS], duration=0.03, rate=1.0, loop=True,
+        wait_for_subscribers=1,
+    )  # fmt: skip
+    nodes.append(player)
+    assert spin_until(ctx, nodes, lambda: len(collector.messages) >= 9, 5)
+    assert not player.done
+    assert stamps_ns(collector.messages[:9]) == [0, 10 * MS, 20 * MS] * 3
+
+
+def test_clock_follows_bag_time(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    follower = Collector(
+        ctx,
+        Clock,
+        wire.CLOCK,
+        wire.CLOCK_QOS,
+        parameter_overrides=[Parameter("use_sim_time", value=True)],
+    )
+    nodes.append(follower)
+    player = PlayerNode(
+        context=ctx, bag=path, topics=[JS], start=0.5, duration=0.4, rate=1.0, clock_hz=100.0
+    )
+    nodes.append(player)
+    assert JS in player.played and "/clock" not in player.played
+    # Playing starts at once (no subscriber wanted); the clock starts when it matches.
+    assert spin_until(ctx, nodes, lambda: player.done, 5)
+    ticks = [wire.stamp_to_ns(m.clock) for m in follower.messages]
+    assert len(ticks) >= 15, ticks
+    assert all(500 * MS <= t <= 900 * MS for t in ticks), ticks
+    assert ticks == sorted(ticks)
+    assert ticks[-1] - ticks[0] >= 250 * MS
+    # Bag time advances like wall time at rate 1 (loose: executor and DDS latency).
+    wall = follower.arrivals[-1] - follower.arrivals[0]
+    assert abs((ticks[-1] - ticks[0]) / 1e9 - wall) < 0.1, (ticks[-1] - ticks[0], wall)
+    # A use_sim_time node's clock now follows the bag.
+    assert 500 * MS <= follower.get_clock().now().nanoseconds <= 900 * MS
+
+
+def test_clock_cannot_be_played_and_published(recorded, ros):
+    _, path = recorded
+    ctx, _ = ros
+    with pytest.raises(ValueError, match="parameter 'topics'"):
+        PlayerNode(context=ctx, bag=path, topics=["/clock"], clock_hz=10.0)
+
+
+def test_remap_publishes_on_the_new_name(recorded, ros):
+    _, path = recorded
+    ctx, nodes = ros
+    player = PlayerNode(
+        context=ctx, bag=path, topics=[JS], remap=["/joint_states:=replay/joint_states"]
+    )
+    nodes.append(player)
+    assert player.played[JS].published == "/replay/joint_states"
+
+
+def test_main_plays_to_the_end_and_exits_0(recorded):
+    _, path = recorded
+    assert main([str(path), "--topics", JS, "--duration", "0.05", "--rate", "0"]) == 0
+
+
+def test_missing_bag_exits_2_with_one_line(tmp_path, capsys):
+    assert main([str(tmp_path / "missing.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "missing.mcap" in err, err
+
+
+def test_unreadable_bag_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file")
+    assert main([str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "bad.mcap" in err, err
+
+
+def test_unknown_topic_exits_2(recorded, capsys):
+    _, path = recorded
+    assert main([str(path), "--topics", "/nope"]) == 2
+    assert "/nope" in capsys.readouterr().err
+
+
+def test_help_exits_0(capsys):
+    assert main(["--help"]) == 0
+    assert "--clock" in capsys.readouterr().out
