@@ -60,3 +60,13 @@ def test_cli_json_and_errors(recording, capsys, tmp_path):
     assert "| ct_c | joint_3 |" in capsys.readouterr().out
     assert main([str(tmp_path / "missing.mcap")]) == 2
     assert "missing.mcap" in capsys.readouterr().err
+
+
+def test_report_writes_markdown_and_figures(recording, tmp_path):
+    _, path = recording
+    assert main([str(path), "--report", str(tmp_path / "rep")]) == 0
+    report = (tmp_path / "rep" / "report.md").read_text()
+    assert "| ct_c | joint_1 |" in report
+    for png in ("errors.png", "torques.png"):
+        data = (tmp_path / "rep" / png).read_bytes()
+        assert data.startswith(b"\x89PNG") and len(data) > 10_000

@@ -88,6 +88,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
     parser.add_argument("recordings", nargs="+", help="MCAP files written by experiment/recorder")
     parser.add_argument("--json", action="store_true", help="print {'runs': [...]} as JSON")
+    parser.add_argument(
+        "--report",
+        metavar="DIR",
+        help="also write DIR/report.md with the table and PNG figures of these recordings",
+    )
     args = parser.parse_args(argv)
     results = []
     for path in args.recordings:
@@ -100,7 +105,45 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps({"runs": results}, indent=1))
     else:
         print(format_table(results))
+    if args.report:
+        path = write_report(Path(args.report), args.recordings, results)
+        print(f"report: {path}", file=sys.stderr)
     return 0
+
+
+def write_report(out: Path, recordings: Sequence[str], results: Sequence[dict[str, Any]]) -> Path:
+    """``out/report.md``: the metrics table and, for all recordings together, the position
+    errors and applied torques per joint, plus the identified parameters of each adaptive run.
+    """
+    from apc_plant_sim import plots
+
+    out.mkdir(parents=True, exist_ok=True)
+    runs = {Path(p).stem: load_run(p) for p in recordings}
+    pumas = all(r.joint_names == ("joint_1", "joint_2", "joint_3") for r in runs.values())
+    figures = [
+        plots.controller_comparison(
+            runs, out / "errors.png", "Position error per joint", paper_signs=pumas
+        ),
+        plots.applied_torques(
+            runs, out / "torques.png", "Applied torque per joint", paper_signs=pumas
+        ),
+    ]
+    for name, run in runs.items():
+        if run.theta is not None:
+            figures.append(
+                plots.identified_parameters(
+                    run, out / f"identified_{name}.png", f"Identified parameters: {name}"
+                )
+            )
+    text = (
+        "# apc analysis\n\n"
+        + format_table(results)
+        + "\n\n"
+        + "\n".join(f"![{f.stem}]({f.name})" for f in figures)
+        + "\n"
+    )
+    (out / "report.md").write_text(text)
+    return out / "report.md"
 
 
 if __name__ == "__main__":
