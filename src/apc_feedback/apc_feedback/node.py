@@ -7,15 +7,23 @@ trace(P) and residual norm on ``feedback/estimate``. A re-sent sample (lockstep 
 answered from a cache, so the identifier never sees a sample twice.
 
 Controller kinds: ``adaptive`` (the paper's), ``computed_torque`` (Eq. 36), ``pd``, ``none``.
+
+The weights and gains ``adaptive.q_position``, ``adaptive.q_velocity``, ``adaptive.r``,
+``gains.kp`` and ``gains.kv`` can be changed while the node runs (``ros2 param set``); a value
+is checked when it is set (refused with a reason naming the parameter) and applied from the
+next sample on. Every other parameter is read-only.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from typing import Any
 
 import numpy as np
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -29,11 +37,13 @@ from apc_msgs_py.nodeutil import (
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    guarded,
     reject,
     robot_from_params,
     run_node,
+    sample_index,
 )
-from apc_msgs_py.params import ConfigError, Param, declare, subset
+from apc_msgs_py.params import ConfigError, Param, check_number, declare, subset
 from apc_msgs_py.robot import with_inertia_error
 
 CONTROLLER_KINDS = ("adaptive", "computed_torque", "pd", "none")
@@ -47,10 +57,32 @@ PARAMS: tuple[Param, ...] = (
     ),
     Param("controller", "adaptive", f"feedback law: one of {', '.join(CONTROLLER_KINDS)}"),
     Param(
-        "adaptive.q_position", 0.1, "Q weight of the position error, Eq. 34 (1/rad^2)", 0.0, 1e12
+        "adaptive.q_position",
+        0.1,
+        "Q weight of the position error, Eq. 34 (1/rad^2); settable at run time",
+        0.0,
+        1e12,
+        read_only=False,
+        dynamic_typing=True,
     ),
-    Param("adaptive.q_velocity", 0.1, "Q weight of the velocity error, Eq. 34", 0.0, 1e12),
-    Param("adaptive.r", 1e-6, "R weight of the torque, Eq. 34 (1/(N m)^2), > 0", 1e-15, 1e12),
+    Param(
+        "adaptive.q_velocity",
+        0.1,
+        "Q weight of the velocity error, Eq. 34; settable at run time",
+        0.0,
+        1e12,
+        read_only=False,
+        dynamic_typing=True,
+    ),
+    Param(
+        "adaptive.r",
+        1e-6,
+        "R weight of the torque, Eq. 34 (1/(N m)^2), > 0; settable at run time",
+        1e-15,
+        1e12,
+        read_only=False,
+        dynamic_typing=True,
+    ),
     Param("adaptive.rho", 0.95, "RLS forgetting factor rho, Eqs. 29-31; 0 < rho <= 1", 1e-6, 1.0),
     Param("adaptive.alpha", 1.5e5, "P(0) = alpha I, Eq. 32", 1e-12, 1e15),
     Param(
@@ -100,9 +132,35 @@ PARAMS: tuple[Param, ...] = (
         False,
         "refuse RLS steps that make G's velocity block (~T D^-1) indefinite; put the jump in w",
     ),
-    Param("gains.kp", 100.0, "Kp of computed torque (1/s^2) or PD (N m/rad)", 0.0, 1e9),
-    Param("gains.kv", 20.0, "Kv of computed torque (1/s) or PD (N m s/rad)", 0.0, 1e9),
+    Param(
+        "gains.kp",
+        100.0,
+        "Kp of computed torque (1/s^2) or PD (N m/rad); settable at run time",
+        0.0,
+        1e9,
+        read_only=False,
+        dynamic_typing=True,
+    ),
+    Param(
+        "gains.kv",
+        20.0,
+        "Kv of computed torque (1/s) or PD (N m s/rad); settable at run time",
+        0.0,
+        1e9,
+        read_only=False,
+        dynamic_typing=True,
+    ),
 )
+
+#: The parameters that can change while the node runs, by name.
+RUNTIME_PARAMS: dict[str, Param] = {p.name: p for p in PARAMS if not p.read_only}
+#: Which family of runtime parameters each law uses.
+RUNTIME_FAMILY = {"adaptive": "adaptive.", "computed_torque": "gains.", "pd": "gains."}
+#: Attributes of :class:`AdaptiveFeedback` derived from its weights (not identifier state):
+#: a runtime change builds a fresh law with the new config and copies these into the running one.
+ADAPTIVE_WEIGHT_ATTRS = ("config", "Q", "R", "_Q_aug")
+#: Samples waiting for their other half; beyond this the oldest is dropped (bounded memory).
+MAX_PENDING = 100
 
 
 def make_law(kind: str, values: dict[str, Any], model: Any) -> FeedbackLaw:
@@ -132,6 +190,8 @@ class FeedbackNode(Node):
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
         values = declare(self, PARAMS)
+        for name, param in RUNTIME_PARAMS.items():  # dynamically typed: check the type here
+            values[name] = check_number(param, values[name])
         robot = robot_from_params(values)
         self.joint_names = robot.joint_names
         n = robot.n_joints
@@ -155,12 +215,81 @@ class FeedbackNode(Node):
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
         self._started = False
+        self._gain_updates: dict[str, float] = {}
 
         self.torque_pub = self.create_publisher(JointState, wire.FEEDBACK_TORQUE, qos)
         self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, qos)
-        self.create_subscription(JointState, wire.JOINT_STATES, self._on_joint_state, qos)
-        self.create_subscription(JointTrajectory, wire.SETPOINT, self._on_setpoint, qos)
+        diag = self.diagnostics
+        self.create_subscription(
+            JointState,
+            wire.JOINT_STATES,
+            guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
+            qos,
+        )
+        self.create_subscription(
+            JointTrajectory,
+            wire.SETPOINT,
+            guarded(self, diag, wire.SETPOINT, self._on_setpoint),
+            qos,
+        )
         DiagnosticsPublisher(self, self.diagnostics)
+        # After declaring: rclpy calls this for every later set (read-only ones are refused
+        # by rclpy before it gets here, with "Trying to set a read-only parameter: <name>.").
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    # -- runtime parameters ---------------------------------------------------------------------
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Check new weights/gains; they are applied at the next sample (all or none)."""
+        updates: dict[str, float] = {}
+        for parameter in parameters:
+            row = RUNTIME_PARAMS.get(parameter.name)
+            if row is None:
+                continue  # e.g. use_sim_time: not ours to judge
+            try:
+                value = check_number(row, parameter.value)
+            except ConfigError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            family = RUNTIME_FAMILY.get(self.kind)
+            if family is None or not parameter.name.startswith(family):
+                return SetParametersResult(
+                    successful=False,
+                    reason=f"parameter '{parameter.name}': not used by controller '{self.kind}'",
+                )
+            updates[parameter.name] = value
+        self._gain_updates.update(updates)
+        return SetParametersResult(successful=True)
+
+    def _apply_gain_updates(self, k: int) -> None:
+        """Give the running law the weights/gains set since the last sample (new objects)."""
+        updates, self._gain_updates = self._gain_updates, {}
+        law = self.law
+        try:
+            if isinstance(law, AdaptiveFeedback):
+                config = dataclasses.replace(law.config, **subset(updates, "adaptive."))
+                fresh = AdaptiveFeedback(law.model, config)
+                for attr in ADAPTIVE_WEIGHT_ATTRS:
+                    if hasattr(fresh, attr):
+                        setattr(law, attr, getattr(fresh, attr))
+            elif isinstance(law, (ComputedTorque, PD)):
+                law.gains = dataclasses.replace(law.gains, **subset(updates, "gains."))
+        except ValueError as exc:  # checked when set; a law that still refuses keeps its gains
+            reject(self, self.diagnostics, "parameters", exc)
+            return
+        self.diagnostics.count("parameter_updates")
+        changes = ", ".join(f"{name} = {value:g}" for name, value in sorted(updates.items()))
+        self.get_logger().info(f"sample {k}: applying {changes}")
+
+    # -- samples --------------------------------------------------------------------------------
+    def _hold(self, pending: dict[int, Any], stamp: int, item: Any, topic: str) -> bool:
+        """Keep one half of sample ``stamp`` until the other arrives; False for a duplicate."""
+        if stamp in pending:
+            self.diagnostics.count(f"duplicate.{topic}")  # the first one stands
+            return False
+        pending[stamp] = item
+        if len(pending) > MAX_PENDING:
+            del pending[min(pending)]
+            self.diagnostics.count(f"dropped.{topic}")
+        return True
 
     def _stale(self, stamp: int, topic: str) -> bool:
         if self._done is None or stamp > self._done[0]:
@@ -179,24 +308,26 @@ class FeedbackNode(Node):
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             sample = wire.joint_state_to_arrays(msg, self.joint_names)
+            sample_index(sample.stamp_ns, self.period_ns)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
         if self._stale(sample.stamp_ns, wire.JOINT_STATES):
             return
-        self._states[sample.stamp_ns] = sample
-        self._try(sample.stamp_ns)
+        if self._hold(self._states, sample.stamp_ns, sample, wire.JOINT_STATES):
+            self._try(sample.stamp_ns)
 
     def _on_setpoint(self, msg: JointTrajectory) -> None:
         try:
             setpoint = wire.msg_to_setpoint(msg, self.joint_names)
+            sample_index(setpoint.stamp_ns, self.period_ns)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.SETPOINT, exc)
             return
         if self._stale(setpoint.stamp_ns, wire.SETPOINT):
             return
-        self._setpoints[setpoint.stamp_ns] = setpoint
-        self._try(setpoint.stamp_ns)
+        if self._hold(self._setpoints, setpoint.stamp_ns, setpoint, wire.SETPOINT):
+            self._try(setpoint.stamp_ns)
 
     def _try(self, stamp: int) -> None:
         state, setpoint = self._states.get(stamp), self._setpoints.get(stamp)
@@ -207,6 +338,8 @@ class FeedbackNode(Node):
             for old in [s for s in pending if s <= stamp]:
                 del pending[old]
         k = stamp // self.period_ns
+        if self._gain_updates:
+            self._apply_gain_updates(k)
         with Stopwatch(self.diagnostics, "compute"):
             applied = state.effort if (self._started and state.effort is not None) else None
             try:
@@ -223,24 +356,28 @@ class FeedbackNode(Node):
             except (FeedbackError, ValueError) as exc:
                 reject(self, self.diagnostics, "feedback_law", exc)
                 return
-            if not np.all(np.isfinite(out.du)):
-                reject(self, self.diagnostics, "feedback_law", FeedbackError("du not finite"))
-                return
-            torque = wire.torque_to_msg(stamp, self.joint_names, out.du, self._torque_msg)
-            estimate = None
-            rls = getattr(self.law, "rls", None)
-            if rls is not None:
+            try:
+                # Refuses du (or an estimate) that is not finite or beyond the wire's bound:
+                # nothing is published, the plant's watchdog / lockstep timeout takes over.
+                torque = wire.torque_to_msg(stamp, self.joint_names, out.du, self._torque_msg)
+                estimate = None
+                rls = getattr(self.law, "rls", None)
                 # 0 before the first identification step: nothing non-finite goes on the wire.
                 residual = float(np.linalg.norm(out.residual)) if out.residual is not None else 0.0
-                estimate = wire.estimate_to_msg(
-                    rls.F,
-                    rls.G,
-                    rls.w,
-                    out.trace_p,
-                    residual,
-                    stamp_ns=stamp,
-                    msg=self._estimate_msg,
-                )
+                if rls is not None:
+                    estimate = wire.estimate_to_msg(
+                        rls.F,
+                        rls.G,
+                        rls.w,
+                        out.trace_p,
+                        residual,
+                        stamp_ns=stamp,
+                        msg=self._estimate_msg,
+                    )
+            except wire.WireError as exc:
+                reject(self, self.diagnostics, "feedback_law", exc)
+                return
+            if rls is not None:
                 self.diagnostics.set("trace_p", f"{out.trace_p:.4g}")
                 self.diagnostics.set("residual_norm", f"{residual:.4g}")
                 if out.rejected:

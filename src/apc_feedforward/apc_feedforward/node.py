@@ -22,7 +22,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_feedforward.nominal import Feedforward
+from apc_feedforward.nominal import Feedforward, FeedforwardError
 from apc_feedforward.trajectory import (
     FourThreeFour,
     Quintic,
@@ -36,12 +36,19 @@ from apc_msgs_py.nodeutil import (
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    guarded,
     reject,
     robot_from_params,
     run_node,
+    sample_index,
 )
 from apc_msgs_py.params import ConfigError, Param, declare
 from apc_msgs_py.robot import with_inertia_error
+
+#: Goals waiting for the current motion to end; one more is rejected (a flood is not a plan).
+MAX_QUEUED_GOALS = 100
+#: A goal's plan is checked on at most this many sample times before it is accepted.
+PLAN_CHECK_SAMPLES = 10_000
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
@@ -104,15 +111,25 @@ class FeedforwardNode(Node):
         self.feedforward: Feedforward | None = None
         self._pending: list[wire.Waypoints] = []
         self._last: tuple[int, Any, Any] | None = None  # (stamp, setpoint msg, torque msg)
+        self._last_q: np.ndarray | None = None  # last published q_d (where a fallback holds)
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self._setpoint_msg = JointTrajectory()
         self._torque_msg = JointState()
 
         self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
         self.torque_pub = self.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, qos)
-        self.create_subscription(JointState, wire.JOINT_STATES, self._on_joint_state, qos)
+        diag = self.diagnostics
         self.create_subscription(
-            JointTrajectory, wire.TRAJECTORY_GOAL, self._on_goal, wire.TRAJECTORY_GOAL_QOS
+            JointState,
+            wire.JOINT_STATES,
+            guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
+            qos,
+        )
+        self.create_subscription(
+            JointTrajectory,
+            wire.TRAJECTORY_GOAL,
+            guarded(self, diag, wire.TRAJECTORY_GOAL, self._on_goal),
+            wire.TRAJECTORY_GOAL_QOS,
         )
         DiagnosticsPublisher(self, self.diagnostics)
 
@@ -136,7 +153,8 @@ class FeedforwardNode(Node):
             start = ff.trajectory.sample(ff.trajectory.duration)[0]
             try:
                 plan = self._plan(start, goal)
-            except TrajectoryError as exc:
+                self._check_plan(plan)
+            except ValueError as exc:  # TrajectoryError, or a plan that cannot be published
                 reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
                 continue
             ff.set_trajectory(plan, max(k, ff.end_k()))
@@ -153,13 +171,44 @@ class FeedforwardNode(Node):
             accelerations=goal.accelerations,
         )
 
+    def _check_limits(self, positions: np.ndarray) -> None:
+        """Refuse waypoints outside the URDF's joint position limits."""
+        lower, upper = self.controller_robot.position_limits
+        if lower.shape != positions.shape[1:] or upper.shape != positions.shape[1:]:
+            return  # a model without position limits
+        outside = (positions < lower) | (positions > upper)
+        if outside.any():
+            j, i = (int(v) for v in np.argwhere(outside)[0])
+            raise wire.WireError(
+                f"points[{j}].positions: {positions[j, i]:.6g} rad at joint "
+                f"{self.joint_names[i]!r} is outside the URDF limits "
+                f"[{lower[i]:.6g}, {upper[i]:.6g}]"
+            )
+
+    def _check_plan(self, plan: Trajectory) -> None:
+        """Refuse a plan whose set points could not go on the wire (beyond its bound)."""
+        count = int(min(np.ceil(plan.duration / self.period) + 1, PLAN_CHECK_SAMPLES))
+        times = np.linspace(0.0, plan.duration, max(count, 2))
+        for field, values in zip(
+            ("positions", "velocities", "accelerations"), plan.sample_many(times), strict=True
+        ):
+            peak = float(np.max(np.abs(values)))
+            if not peak <= wire.DEFAULT_MAX_ABS:  # also NaN
+                raise TrajectoryError(
+                    f"points: the planned {field} reach {peak:.3g} (more than "
+                    f"{wire.DEFAULT_MAX_ABS:g}); the goal is too fast for its distance"
+                )
+
     def _on_goal(self, msg: JointTrajectory) -> None:
         try:
             goal = wire.msg_to_waypoints(msg, self.joint_names)
-            # Check the goal now (timing, shapes) with its first point as a stand-in start; it is
-            # planned for real from the end of the motion before it when it starts.
-            self._plan(goal.positions[0], goal)
-        except (wire.WireError, TrajectoryError) as exc:
+            self._check_limits(goal.positions)
+            if len(self._pending) >= MAX_QUEUED_GOALS:
+                raise wire.WireError(f"points: {MAX_QUEUED_GOALS} goals already queued")
+            # Check the goal now (timing, shapes, speed) with its first point as a stand-in
+            # start; it is planned for real from the end of the motion before it when it starts.
+            self._check_plan(self._plan(goal.positions[0], goal))
+        except ValueError as exc:  # WireError, TrajectoryError
             reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
             return
         self._pending.append(goal)
@@ -173,6 +222,7 @@ class FeedforwardNode(Node):
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             sample = wire.joint_state_to_arrays(msg, self.joint_names, require=("position",))
+            k = sample_index(sample.stamp_ns, self.period_ns)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
@@ -184,32 +234,51 @@ class FeedforwardNode(Node):
                 self.setpoint_pub.publish(self._last[1])
                 self.torque_pub.publish(self._last[2])
             else:
-                reject(self, self.diagnostics, wire.JOINT_STATES, wire.WireError("stale stamp"))
+                error = wire.WireError(
+                    f"header.stamp: {stamp} ns is stale (sample {self._last[0]} ns already done)"
+                )
+                reject(self, self.diagnostics, wire.JOINT_STATES, error)
             return
-        if stamp % self.period_ns != 0:
-            reject(
-                self,
-                self.diagnostics,
-                wire.JOINT_STATES,
-                wire.WireError(f"header.stamp {stamp} ns is not a multiple of the period"),
-            )
-            return
-        k = stamp // self.period_ns
         with Stopwatch(self.diagnostics, "compute"):
-            if self.feedforward is None:
-                self._start(sample.position, k)
-            self._advance(k)
-            assert self.feedforward is not None
-            sp = self.feedforward.sample(k)
-            t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
-            setpoint = wire.setpoint_to_msg(
-                stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
-            )
-            torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
+            try:
+                q_d, setpoint, torque = self._compute(k, sample.position)
+            except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc:
+                # The plan cannot be published (e.g. a motion too fast for the wire's bound):
+                # drop it and hold the last set point, so the loop keeps its nominal torque.
+                self.diagnostics.count("plan_errors")
+                self.get_logger().error(
+                    f"sample {k}: {exc}; dropping the plan and holding the last set point",
+                    throttle_duration_sec=1.0,
+                )
+                hold = self._last_q if self._last_q is not None else sample.position
+                self.feedforward = Feedforward(
+                    self.controller_robot.model, Quintic(hold, hold, self.period), self.period, k
+                )
+                try:
+                    q_d, setpoint, torque = self._compute(k, sample.position)
+                except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc2:
+                    reject(self, self.diagnostics, "feedforward_compute", exc2)
+                    return
         self.setpoint_pub.publish(setpoint)
         self.torque_pub.publish(torque)
         self._last = (stamp, setpoint, torque)
+        self._last_q = q_d
         self.diagnostics.count("samples")
+
+    def _compute(self, k: int, position: np.ndarray) -> tuple[np.ndarray, Any, Any]:
+        """Set point and nominal torque of sample ``k`` as messages (validated for the wire)."""
+        if self.feedforward is None:
+            self._start(position, k)
+        self._advance(k)
+        assert self.feedforward is not None
+        sp = self.feedforward.sample(k)
+        stamp = wire.sample_stamp_ns(k, self.period_ns)
+        t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
+        setpoint = wire.setpoint_to_msg(
+            stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
+        )
+        torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
+        return sp.q, setpoint, torque
 
 
 def main(args: list[str] | None = None) -> int:

@@ -5,13 +5,19 @@
 - :class:`Diagnostics` — counters and timing, published on ``/diagnostics`` at 1 Hz wall time.
 - :func:`run_node` — ``main`` for a node executable: ``--help``, one-line start-up errors with
   exit code 2, clean shutdown on SIGINT/SIGTERM (Jazzy: try/finally and ``try_shutdown``).
+- :func:`reject`, :func:`sample_index`, :func:`guarded` — the border: a bad message is counted
+  and logged (throttled), a stamp off the sample grid is refused, and an exception in a
+  callback is caught and counted instead of ending the node's spin.
 """
 
 from __future__ import annotations
 
+import functools
 import os
+import signal
 import statistics
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
@@ -101,7 +107,8 @@ def robot_from_params(values: dict[str, Any]) -> Robot:
             lock_joints=tuple(values.get("lock_joints", ())),
         )
     except RobotModelError as exc:
-        raise ConfigError(f"parameter '{source_param}': {exc}") from None
+        param = "lock_joints" if str(exc).startswith("lock_joints") else source_param
+        raise ConfigError(f"parameter '{param}': {exc}") from None
 
 
 class Diagnostics:
@@ -192,6 +199,49 @@ def reject(node: Node, diagnostics: Diagnostics, topic: str, exc: Exception) -> 
     )
 
 
+def sample_index(stamp_ns: int, period_ns: int) -> int:
+    """The sample index ``k`` of a message stamped ``kT``.
+
+    Raises
+    ------
+    WireError
+        If the stamp is negative or not a whole multiple of the period: no node ever sent
+        such a sample (the plant stamps sample ``k`` exactly ``k * T``, ``k >= 0``).
+    """
+    if stamp_ns < 0:
+        raise WireError(f"header.stamp: {stamp_ns} ns is negative (samples are kT, k >= 0)")
+    if stamp_ns % period_ns:
+        raise WireError(
+            f"header.stamp: {stamp_ns} ns is not on the sample grid (a multiple of {period_ns} ns)"
+        )
+    return stamp_ns // period_ns
+
+
+def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable) -> Callable:
+    """Wrap a subscription or timer callback so that an exception cannot end the spin.
+
+    Bad input is rejected inside the callbacks (:func:`reject`); what reaches this is a bug or
+    an unforeseen case. It is counted (``callback_errors`` and ``callback_errors.<name>`` on
+    ``/diagnostics``), logged (throttled) with its type, and the node carries on with the next
+    message. The wrapper keeps the callback's signature (rclpy inspects it).
+    """
+
+    @functools.wraps(callback)
+    def wrapper(*args: Any) -> Any:
+        try:
+            return callback(*args)
+        except Exception as exc:  # the last line of defence of a running node
+            n = diagnostics.count(f"callback_errors.{name}")
+            diagnostics.count("callback_errors")
+            node.get_logger().error(
+                f"{name}: {type(exc).__name__}: {exc} ({n} so far); carrying on",
+                throttle_duration_sec=1.0,
+            )
+            return None
+
+    return wrapper
+
+
 def print_help(prog: str, summary: str, params: Iterable[Param]) -> None:
     print(f"usage: {prog} [--ros-args -p NAME:=VALUE ... --params-file FILE]\n")
     print(summary.strip() + "\n")
@@ -227,6 +277,18 @@ def run_node(
     if {"-h", "--help"} & set(_user_args(argv)):
         print_help(prog, summary, params)
         return 0
+    # rclpy's SIGINT handler shuts the context down and then calls the handler it replaced. If
+    # that is Python's default, a KeyboardInterrupt is also raised wherever Python happens to be,
+    # e.g. inside rclpy's message conversion in take_message, which turns it into "RuntimeError:
+    # Unable to convert call argument" and a traceback with exit code 1 (seen when the runner
+    # stopped its children). With a no-op Python handler the shutdown is rclpy's alone: the
+    # spin loop below ends cleanly. Restored on the way out.
+    previous_sigint = None
+    if (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    ):
+        previous_sigint = signal.signal(signal.SIGINT, _leave_to_rclpy)
     rclpy.init(args=[prog, *argv])
     node: Node | None = None
     code = 0
@@ -236,6 +298,10 @@ def run_node(
         except (ConfigError, RobotModelError, WireError, ValueError) as exc:
             print(f"{prog}: {exc}", file=sys.stderr)
             return 2
+        except Exception:
+            if rclpy.ok():
+                raise
+            return 0  # stopped by a signal while the node was being built
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
@@ -260,8 +326,62 @@ def run_node(
                 closer()
             node.destroy_node()
         rclpy.try_shutdown()
+        if previous_sigint is not None:
+            signal.signal(signal.SIGINT, previous_sigint)
     return code
+
+
+def _leave_to_rclpy(signum: int, frame: Any) -> None:
+    """SIGINT handler under rclpy's: do nothing (rclpy has already shut the context down)."""
 
 
 def finite(values: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(values)))
+
+
+class StopSignals:
+    """SIGINT/SIGTERM as a flag, for a program that spins its own ``rclpy.Context``.
+
+    ``rclpy.init()`` installs its SIGINT/SIGTERM handlers only for the *default* context; a
+    program that creates its own ``rclpy.Context()`` (the ``experiment`` runner) gets none:
+    SIGINT raises ``KeyboardInterrupt`` wherever Python happens to be (possibly inside a
+    recorder callback, half-way through a chunk) and SIGTERM kills the process on the spot (no
+    finished recording, child nodes left running). Inside ``with StopSignals() as stop:`` both
+    signals only set :attr:`received`; the program calls :meth:`check` between ``spin_once``
+    calls, where stopping is safe, and cleans up in ``finally``. The previous handlers come
+    back on exit. Outside the main thread, or where a signal's handler is not Python's default
+    (ignored, or installed from C), nothing is changed for that signal.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> StopSignals:
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        for sig in self.SIGNALS:
+            current = signal.getsignal(sig)
+            if current in (signal.SIG_DFL, signal.default_int_handler):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.received is None:
+            self.received = signum
+
+    def check(self) -> bool:
+        """Raise ``KeyboardInterrupt`` once a signal has arrived; else return False.
+
+        Returns False so that it can lead a wait condition: ``lambda: stop.check() or ready()``.
+        """
+        if self.received is not None:
+            raise KeyboardInterrupt(signal.Signals(self.received).name)
+        return False
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()

@@ -8,6 +8,7 @@ declares them all with ``ParameterDescriptor``\\ s and returns a plain ``dict``;
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -52,6 +53,9 @@ class Param:
         Cannot change after start-up (timing, model, joint names).
     array_of : type
         Element type of an array parameter (needed when the default is empty).
+    dynamic_typing : bool
+        Let rclpy accept a value of another type (e.g. ``ros2 param set ... 200``, an integer,
+        for a double); the node must then check the type itself (see :func:`check_number`).
     """
 
     name: str
@@ -61,10 +65,14 @@ class Param:
     high: float | None = None
     read_only: bool = True
     array_of: type = float
+    dynamic_typing: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
         desc = ParameterDescriptor(
-            name=self.name, description=self.description, read_only=self.read_only
+            name=self.name,
+            description=self.description,
+            read_only=self.read_only,
+            dynamic_typing=self.dynamic_typing,
         )
         value = self.default
         if isinstance(value, list):
@@ -115,6 +123,26 @@ def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
             value = list(value) if value is not None else []
         values[p.name] = value
     return values
+
+
+def check_number(param: Param, value: Any) -> float:
+    """``value`` as a float within ``param``'s range, or :class:`ConfigError` naming it.
+
+    Integers are accepted for a double (``ros2 param set`` sends ``200`` as an integer);
+    booleans, strings, arrays and unset values are not.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(
+            f"parameter '{param.name}': must be a number, got {type(value).__name__} {value!r}"
+        )
+    number = float(value)
+    if not math.isfinite(number):
+        raise ConfigError(f"parameter '{param.name}': must be finite, got {number}")
+    if param.low is not None and param.high is not None and not param.low <= number <= param.high:
+        raise ConfigError(
+            f"parameter '{param.name}': {number:g} is outside [{param.low:g}, {param.high:g}]"
+        )
+    return number
 
 
 def subset(values: Mapping[str, Any], prefix: str) -> dict[str, Any]:

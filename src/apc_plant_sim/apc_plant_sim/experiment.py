@@ -154,159 +154,205 @@ class RunOutcome:
 def run_in_process(
     spec: RunSpec, out_dir: Path, *, progress: bool = True, timeout_s: float = 600.0
 ) -> RunOutcome:
-    """Run the four nodes in this process on one ``SingleThreadedExecutor``."""
+    """Run the four nodes in this process on one ``SingleThreadedExecutor``.
+
+    SIGINT and SIGTERM end the run between two ``spin_once`` calls (``StopSignals``: rclpy
+    installs no handlers for a context of our own): the recording is finished, every node
+    destroyed, and the outcome says ``interrupted``.
+    """
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
+    from apc_msgs_py.nodeutil import StopSignals
     from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{spec.name}.mcap"
     params = spec.node_parameters()
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    nodes = []
-    t0 = time.monotonic()
-    try:
-        sim_time = [Parameter("use_sim_time", value=True)]
-        recorder = RecorderNode(
-            output=path,
-            context=context,
-            parameter_overrides=sim_time,
-            custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
-        )
-        nodes.append(recorder)
-        nodes.append(
-            FeedforwardNode(
-                context=context, parameter_overrides=_overrides(params["feedforward_node"])
+    with StopSignals() as stop:
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        nodes = []
+        plant = None
+        t0 = time.monotonic()
+        try:
+            sim_time = [Parameter("use_sim_time", value=True)]
+            recorder = RecorderNode(
+                output=path,
+                context=context,
+                parameter_overrides=sim_time,
+                custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
             )
-        )
-        nodes.append(
-            FeedbackNode(context=context, parameter_overrides=_overrides(params["feedback_node"]))
-        )
-        executor = SingleThreadedExecutor(context=context)
-        for node in nodes:
-            executor.add_node(node)
-        _wait(
-            executor,
-            lambda: _recorder_hears_controllers(recorder, spec.controller),
-            30.0,
-            "the controllers' publishers",
-        )
-        # The plant comes last: it starts the run once everything listens (wait_for_subscribers).
-        plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
-        nodes.append(plant)
-        executor.add_node(plant)
-        bar = Progress(plant.n_samples, spec.name, progress)
-        while not plant.done and time.monotonic() - t0 < timeout_s:
-            executor.spin_once(timeout_sec=0.05)
-            bar.update(plant.k)
-        bar.close()
-        # Let the recorder take what is still queued (the final sample's torques).
-        deadline = time.monotonic() + 0.5
-        while time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.01)
-        if not plant.done:
-            return RunOutcome(path, False, f"timed out after {timeout_s} s", plant.k, _since(t0))
-        ok = plant.exit_code == 0
-        message = "ok" if ok else plant.diagnostics.message
-        return RunOutcome(path, ok, message, plant.k, _since(t0))
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return RunOutcome(path, False, "interrupted", 0, _since(t0))
-    except TimeoutError as exc:
-        return RunOutcome(path, False, str(exc), 0, _since(t0))
-    finally:
-        for node in reversed(nodes):
-            closer = getattr(node, "close", None)
-            if callable(closer):
-                closer()
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
+            nodes.append(recorder)
+            nodes.append(
+                FeedforwardNode(
+                    context=context, parameter_overrides=_overrides(params["feedforward_node"])
+                )
+            )
+            nodes.append(
+                FeedbackNode(
+                    context=context, parameter_overrides=_overrides(params["feedback_node"])
+                )
+            )
+            executor = SingleThreadedExecutor(context=context)
+            for node in nodes:
+                executor.add_node(node)
+            _wait(
+                executor,
+                lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
+                30.0,
+                "the controllers' publishers",
+            )
+            # The plant comes last: it starts the run once everything listens
+            # (wait_for_subscribers).
+            plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
+            nodes.append(plant)
+            executor.add_node(plant)
+            bar = Progress(plant.n_samples, spec.name, progress)
+            while not plant.done and time.monotonic() - t0 < timeout_s:
+                executor.spin_once(timeout_sec=0.05)
+                stop.check()
+                bar.update(plant.k)
+            bar.close()
+            # Let the recorder take what is still queued (the final sample's torques).
+            deadline = time.monotonic() + 0.5
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.01)
+                stop.check()
+            if not plant.done:
+                return RunOutcome(
+                    path, False, f"timed out after {timeout_s} s", plant.k, _since(t0)
+                )
+            ok = plant.exit_code == 0
+            message = "ok" if ok else plant.diagnostics.message
+            return RunOutcome(path, ok, message, plant.k, _since(t0))
+        except (KeyboardInterrupt, ExternalShutdownException) as exc:
+            samples = plant.k if plant is not None else 0
+            return RunOutcome(
+                path, False, f"interrupted ({exc})".replace(" ()", ""), samples, _since(t0)
+            )
+        except TimeoutError as exc:
+            return RunOutcome(path, False, str(exc), 0, _since(t0))
+        finally:
+            for node in reversed(nodes):
+                closer = getattr(node, "close", None)
+                if callable(closer):
+                    closer()
+                node.destroy_node()
+            rclpy.try_shutdown(context=context)
 
 
 def run_in_processes(
     spec: RunSpec, out_dir: Path, *, progress: bool = True, timeout_s: float = 600.0
 ) -> RunOutcome:
-    """Plant, feedforward and feedback as three processes; the recorder in this one."""
+    """Plant, feedforward and feedback as three processes; the recorder in this one.
+
+    SIGINT and SIGTERM end the run between two ``spin_once`` calls: the children get SIGINT
+    and are waited for (:func:`stop_processes`), the recording is finished, and the outcome
+    says ``interrupted``. No child outlives the runner.
+    """
+    from apc_msgs_py.nodeutil import StopSignals
     from apc_msgs_py.recorder import RecorderNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{spec.name}.mcap"
     params = spec.node_parameters()
-    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as handle:
-        yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}, handle)
-        params_file = handle.name
     modules = {
         "plant_node": "apc_plant_sim.node",
         "feedforward_node": "apc_feedforward.node",
         "feedback_node": "apc_feedback.node",
     }
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    procs: dict[str, subprocess.Popen] = {}
-    recorder = None
-    t0 = time.monotonic()
-    try:
-        recorder = RecorderNode(
-            output=path,
-            context=context,
-            parameter_overrides=[Parameter("use_sim_time", value=True)],
-            custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
-        )
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(recorder)
+    with StopSignals() as stop:
+        with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as handle:
+            yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}, handle)
+            params_file = handle.name
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        procs: dict[str, subprocess.Popen] = {}
+        recorder = None
+        t0 = time.monotonic()
 
-        def start(name: str) -> None:
-            procs[name] = subprocess.Popen(
-                [sys.executable, "-m", modules[name], "--ros-args", "--params-file", params_file],
-                env=os.environ.copy(),
+        def samples() -> int:
+            return max(recorder.counts.get("/joint_states", 0) - 1, 0) if recorder else 0
+
+        try:
+            recorder = RecorderNode(
+                output=path,
+                context=context,
+                parameter_overrides=[Parameter("use_sim_time", value=True)],
+                custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
             )
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(recorder)
 
-        start("feedforward_node")
-        start("feedback_node")
-        _wait(
-            executor,
-            lambda: _recorder_hears_controllers(recorder, spec.controller),
-            60.0,
-            "the controllers' publishers",
-        )
-        start("plant_node")
-        bar = Progress(spec.scenario.n_samples, spec.name, progress)
-        plant = procs["plant_node"]
-        while plant.poll() is None and time.monotonic() - t0 < timeout_s:
-            executor.spin_once(timeout_sec=0.05)
-            bar.update(recorder.counts.get("/joint_states", 0))
-            for name, proc in procs.items():
-                if name != "plant_node" and proc.poll() is not None:
-                    return RunOutcome(
-                        path, False, f"{name} exited with {proc.returncode}", 0, _since(t0)
-                    )
-        bar.close()
-        deadline = time.monotonic() + 0.5
-        while time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.01)
-        code = plant.poll()
-        samples = max(recorder.counts.get("/joint_states", 0) - 1, 0)
-        if code is None:
-            return RunOutcome(path, False, f"timed out after {timeout_s} s", samples, _since(t0))
-        return RunOutcome(
-            path,
-            code == 0,
-            "ok" if code == 0 else f"plant_node exited with {code}",
-            samples,
-            _since(t0),
-        )
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return RunOutcome(path, False, "interrupted", 0, _since(t0))
-    except TimeoutError as exc:
-        return RunOutcome(path, False, str(exc), 0, _since(t0))
-    finally:
-        stop_processes(procs.values())
-        if recorder is not None:
-            recorder.close()
-            recorder.destroy_node()
-        rclpy.try_shutdown(context=context)
-        Path(params_file).unlink(missing_ok=True)
+            def start(name: str) -> None:
+                stop.check()
+                procs[name] = subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        modules[name],
+                        "--ros-args",
+                        "--params-file",
+                        params_file,
+                    ],
+                    env=os.environ.copy(),
+                )
+
+            start("feedforward_node")
+            start("feedback_node")
+            _wait(
+                executor,
+                lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
+                60.0,
+                "the controllers' publishers",
+            )
+            start("plant_node")
+            bar = Progress(spec.scenario.n_samples, spec.name, progress)
+            plant = procs["plant_node"]
+            while plant.poll() is None and time.monotonic() - t0 < timeout_s:
+                executor.spin_once(timeout_sec=0.05)
+                stop.check()
+                bar.update(recorder.counts.get("/joint_states", 0))
+                for name, proc in procs.items():
+                    if name != "plant_node" and proc.poll() is not None:
+                        return RunOutcome(
+                            path,
+                            False,
+                            f"{name} exited with {proc.returncode}",
+                            samples(),
+                            _since(t0),
+                        )
+            bar.close()
+            deadline = time.monotonic() + 0.5
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.01)
+                stop.check()
+            code = plant.poll()
+            if code is None:
+                return RunOutcome(
+                    path, False, f"timed out after {timeout_s} s", samples(), _since(t0)
+                )
+            return RunOutcome(
+                path,
+                code == 0,
+                "ok" if code == 0 else f"plant_node exited with {code}",
+                samples(),
+                _since(t0),
+            )
+        except (KeyboardInterrupt, ExternalShutdownException) as exc:
+            return RunOutcome(
+                path, False, f"interrupted ({exc})".replace(" ()", ""), samples(), _since(t0)
+            )
+        except TimeoutError as exc:
+            return RunOutcome(path, False, str(exc), samples(), _since(t0))
+        finally:
+            stop_processes(procs.values())
+            if recorder is not None:
+                recorder.close()
+                recorder.destroy_node()
+            rclpy.try_shutdown(context=context)
+            Path(params_file).unlink(missing_ok=True)
 
 
 def stop_processes(procs: Sequence[subprocess.Popen] | Any, timeout_s: float = 3.0) -> None:

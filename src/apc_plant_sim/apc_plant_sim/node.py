@@ -47,9 +47,11 @@ from apc_msgs_py.nodeutil import (
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    guarded,
     reject,
     robot_from_params,
     run_node,
+    sample_index,
 )
 from apc_msgs_py.params import ConfigError, Param, declare
 from apc_msgs_py.robot import Payload, RobotModelError, with_payload
@@ -135,9 +137,14 @@ class PlantNode(Node):
                 com_m=tuple(values["payload.com_m"]),
                 frame=values["payload.frame"] or None,
             )
+        except RobotModelError as exc:  # "payload mass_kg must be ...", "payload com_m ..."
+            raise ConfigError(f"parameter 'payload.{str(exc).split()[1]}': {exc}") from None
+        if payload.frame is not None and not robot.model.existFrame(payload.frame):
+            raise ConfigError(f"parameter 'payload.frame': no frame '{payload.frame}' in the URDF")
+        try:
             plant_robot = with_payload(robot, payload)
         except RobotModelError as exc:
-            raise ConfigError(f"parameter 'payload': {exc}") from None
+            raise ConfigError(f"parameter 'payload.frame': {exc}") from None
         try:
             config = PlantConfig(
                 period=values["period"],
@@ -185,17 +192,26 @@ class PlantNode(Node):
             if values["publish_clock"]
             else None
         )
+        diag = self.diagnostics
         self.ff_sub = self.create_subscription(
-            JointState, wire.FEEDFORWARD_TORQUE, self._on_feedforward, qos
+            JointState,
+            wire.FEEDFORWARD_TORQUE,
+            guarded(self, diag, wire.FEEDFORWARD_TORQUE, self._on_feedforward),
+            qos,
         )
         self.fb_sub = self.create_subscription(
-            JointState, wire.FEEDBACK_TORQUE, self._on_feedback, qos
+            JointState,
+            wire.FEEDBACK_TORQUE,
+            guarded(self, diag, wire.FEEDBACK_TORQUE, self._on_feedback),
+            qos,
         )
-        DiagnosticsPublisher(self, self.diagnostics)
+        self._diagnostics_pub = DiagnosticsPublisher(self, self.diagnostics)
         if self.mode == "lockstep":
-            self._timer = self.create_timer(0.01, self._lockstep_watch, clock=self._wall)
+            tick = guarded(self, diag, "lockstep_watch", self._lockstep_watch)
+            self._timer = self.create_timer(0.01, tick, clock=self._wall)
         else:
-            self._timer = self.create_timer(config.period, self._realtime_tick, clock=self._wall)
+            tick = guarded(self, diag, "realtime_tick", self._realtime_tick)
+            self._timer = self.create_timer(config.period, tick, clock=self._wall)
 
     # -- wire -----------------------------------------------------------------------------------
     @property
@@ -207,14 +223,18 @@ class PlantNode(Node):
         if self.clock_pub is not None:
             self._clock_msg.clock = wire.ns_to_stamp(stamp, self._clock_msg.clock)
             self.clock_pub.publish(self._clock_msg)
-        msg = wire.arrays_to_joint_state(
-            stamp,
-            self.joint_names,
-            position=self.plant.q,
-            velocity=self.plant.qd,
-            effort=self._applied if self._applied is not None else None,
-            msg=self._js_msg,
-        )
+        try:
+            msg = wire.arrays_to_joint_state(
+                stamp,
+                self.joint_names,
+                position=self.plant.q,
+                velocity=self.plant.qd,
+                effort=self._applied if self._applied is not None else None,
+                msg=self._js_msg,
+            )
+        except wire.WireError as exc:  # a state beyond the wire's bound: the simulation blew up
+            self._fail(f"sample {self.k}: the arm's state cannot be published ({exc})")
+            return
         self.js_pub.publish(msg)
         self._sent_wall = time.monotonic()
         if not resend:
@@ -238,15 +258,35 @@ class PlantNode(Node):
             self._take(torque, self._fb, "_fb_latest", wire.FEEDBACK_TORQUE)
 
     def _take(self, torque: wire.Torque, pending: dict, latest_attr: str, topic: str) -> None:
+        """File a torque by its stamp.
+
+        Rejected (counted in ``rejected.<topic>``): a stamp that is negative, off the sample
+        grid, ahead of the current sample, or any torque before the plant sent sample 0 -- no
+        controller can have computed it. Ignored and counted: older than the newest torque
+        held (``out_of_order.<topic>``); in lockstep, an answer to a sample already integrated
+        (``stale.<topic>``, e.g. to a resend) and a second torque for the current sample
+        (``duplicate.<topic>``: the first stands, nothing is applied twice).
+        """
         stamp = torque.stamp_ns
         current = self.k * self.period_ns
-        if stamp > current or stamp % self.period_ns:
-            error = wire.WireError(f"header.stamp {stamp} ns is not a sample the plant sent")
-            reject(self, self.diagnostics, topic, error)
+        try:
+            sample_index(stamp, self.period_ns)
+            if stamp > current or not self.started:
+                raise wire.WireError(
+                    f"header.stamp: {stamp} ns is not a sample the plant sent (at {current} ns)"
+                )
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, topic, exc)
             return
         latest = getattr(self, latest_attr)
         if latest is not None and stamp < latest[0]:
             self.diagnostics.count(f"out_of_order.{topic}")
+            return
+        if self.mode == "lockstep" and stamp < current:
+            self.diagnostics.count(f"stale.{topic}")
+            return
+        if self.mode == "lockstep" and stamp in pending:
+            self.diagnostics.count(f"duplicate.{topic}")
             return
         if stamp == current and self.started:
             self.diagnostics.time(f"latency.{topic}", time.monotonic() - self._first_sent_wall)
@@ -318,7 +358,12 @@ class PlantNode(Node):
         self.diagnostics.level = DiagnosticStatus.ERROR
         self.diagnostics.message = message
         self.exit_code = 1
+        self._finish()
+
+    def _finish(self) -> None:
+        """End the run and report the final counters on ``/diagnostics`` at once."""
         self.done = True
+        self._diagnostics_pub.publish()
 
     def _lockstep_try(self) -> None:
         stamp = self.k * self.period_ns
@@ -326,7 +371,7 @@ class PlantNode(Node):
             return
         if self.n_samples and self.k >= self.n_samples:
             # The torques of the final sample are in (recorded); nothing more to integrate.
-            self.done = True
+            self._finish()
             return
         tau = self._ff.pop(stamp) + self._fb.pop(stamp)
         self._step(tau)
@@ -410,7 +455,7 @@ class PlantNode(Node):
         self._last_tick = now
         self._publish_state()
         if self.n_samples and self.k >= self.n_samples:
-            self.done = True
+            self._finish()
 
     def _brake(self) -> None:
         if not self._braking:

@@ -1,0 +1,1383 @@
+"""Bad input and faults, the input half: malformed messages, bad stamps, runtime parameters,
+bad configuration, torque limits.
+
+The strongest check is :func:`test_fuzz_garbage_on_every_topic_leaves_a_lockstep_run_bit_identical`:
+a lockstep run of plant + feedforward + feedback in one process while a separate node throws
+thousands of hypothesis-generated invalid messages at every subscribed topic; every one is
+rejected and counted by the node it reaches, no callback raises, every output is finite, and
+the run equals the offline loop (= the clean run) bit for bit. Injected messages carry
+``header.frame_id = "fuzz"`` so the capturing node can tell them from the nodes' own output
+(the nodes never read ``frame_id``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticArray
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from apc_feedback.node import FeedbackNode
+from apc_feedforward.node import FeedforwardNode
+from apc_msgs_py import wire
+from apc_msgs_py.robot import load_robot
+from apc_plant_sim.experiment import RunSpec
+from apc_plant_sim.node import PlantNode
+from apc_plant_sim.scenario import PUMA_3DOF_URDF, paper_scenario, paper_settings, run_offline
+
+pytestmark = pytest.mark.ros
+
+ROBOT = load_robot(PUMA_3DOF_URDF)
+NAMES: tuple[str, ...] = ROBOT.joint_names
+N = len(NAMES)
+LOWER, UPPER = ROBOT.position_limits
+T_NS = 10_000_000
+FUZZ = "fuzz"  # header.frame_id of every injected message
+NAN, INF = float("nan"), float("inf")
+
+#: What the capturing node and the injector use: deep enough that nothing is ever dropped.
+DEEP_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+
+def _overrides(values: dict[str, Any]) -> list[Parameter]:
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+class Graph:
+    """Nodes of one test on their own context and executor; everything is torn down after."""
+
+    def __init__(self) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.nodes: list[Any] = []
+
+    def add(self, node: Any) -> Any:
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, condition: Any, timeout_s: float = 20.0, what: str = "condition") -> None:
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            assert time.monotonic() < deadline, f"{what} not met within {timeout_s} s"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.005)
+
+    def close(self) -> None:
+        for node in reversed(self.nodes):
+            closer = getattr(node, "close", None)
+            if callable(closer):
+                closer()
+            node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def graph():
+    g = Graph()
+    try:
+        yield g
+    finally:
+        g.close()
+
+
+def counter(node: Any, key: str) -> int:
+    return node.diagnostics.counters.get(key, 0)
+
+
+def errors(node: Any) -> int:
+    """Exceptions a node's callbacks caught (a bug, never bad input: that is 'rejected')."""
+    return counter(node, "callback_errors")
+
+
+# ----------------------------------------------------------------------------------------------
+# Stamps: resolved when the message is published, relative to the plant's current sample k
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Stamp:
+    """``kind``: rel (plausible: k + a), neg (< 0), offgrid (k + a, plus b ns), nanosec
+    (nanosec >= 1e9), stale (k - a, a >= 2: older than any sample a node still waits for),
+    far (k + 100000 + a: in the future, only for torques)."""
+
+    kind: str
+    a: int = 0
+    b: int = 0
+
+    def resolve(self, k: int) -> Time:
+        if self.kind == "nanosec":
+            return Time(sec=max(k + self.a, 0) * T_NS // wire.NS_PER_S, nanosec=self.b)
+        ns = {
+            "rel": max(k + self.a, 0) * T_NS,
+            "neg": -self.a * T_NS - self.b,
+            "offgrid": max(k + self.a, 0) * T_NS + self.b,
+            "stale": (k - self.a) * T_NS,
+            "far": (k + 100_000 + self.a) * T_NS,
+        }[self.kind]
+        sec, nanosec = divmod(ns, wire.NS_PER_S)
+        return Time(sec=sec, nanosec=nanosec)
+
+
+def stamps(*kinds: str) -> st.SearchStrategy[Stamp]:
+    options = {
+        "rel": st.builds(Stamp, st.just("rel"), st.integers(-3, 3)),
+        "neg": st.one_of(
+            st.builds(Stamp, st.just("neg"), st.integers(1, 10**6)),  # on the grid
+            st.builds(Stamp, st.just("neg"), st.integers(0, 10**6), st.integers(1, T_NS - 1)),
+        ),
+        "offgrid": st.builds(
+            Stamp, st.just("offgrid"), st.integers(-2, 3), st.integers(1, T_NS - 1)
+        ),
+        "nanosec": st.builds(
+            Stamp, st.just("nanosec"), st.integers(-2, 3), st.integers(wire.NS_PER_S, 2**32 - 1)
+        ),
+        "stale": st.builds(Stamp, st.just("stale"), st.integers(2, 50)),
+        "far": st.builds(Stamp, st.just("far"), st.integers(0, 10**5)),
+    }
+    return st.one_of(*(options[k] for k in kinds))
+
+
+PLAUSIBLE = st.floats(-3.0, 3.0, allow_nan=False)
+BAD = st.one_of(
+    st.sampled_from([NAN, INF, -INF]),
+    st.floats(1.0e6, 1e308, exclude_min=True),
+    st.floats(-1e308, -1.0e6, exclude_max=True),
+)
+UNKNOWN_NAME = st.text(max_size=8).filter(lambda s: s not in NAMES)
+
+
+def vec(draw: Any, n: int, values: Any = PLAUSIBLE) -> list[float]:
+    return [draw(values) for _ in range(n)]
+
+
+def spoil(draw: Any, values: list[float]) -> list[float]:
+    """One entry replaced by NaN, Inf or a value beyond 1e6."""
+    out = list(values)
+    out[draw(st.integers(0, len(out) - 1))] = draw(BAD)
+    return out
+
+
+NAME_DEFECTS = ("no_names", "missing", "unknown", "extra", "duplicate")
+
+
+def apply_name_defect(draw: Any, defect: str, names: list[str], columns: list[list]) -> list[str]:
+    """Spoil the joint names; ``columns`` (per-joint arrays) are kept consistent in place."""
+    i = draw(st.integers(0, N - 1))
+    if defect == "no_names":
+        return []
+    if defect == "missing":
+        for col in columns:
+            if len(col) == N:
+                del col[i]
+        return names[:i] + names[i + 1 :]
+    if defect == "unknown":
+        return [*names[:i], draw(UNKNOWN_NAME), *names[i + 1 :]]
+    if defect == "extra":
+        for col in columns:
+            if len(col) == N:
+                col.append(draw(PLAUSIBLE))
+        return [*names, draw(UNKNOWN_NAME)]
+    j = draw(st.integers(0, N - 1).filter(lambda j: j != i))
+    out = list(names)
+    out[i] = out[j]
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Garbage messages: each is invalid for every node that subscribes to its topic
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Garbage:
+    """One injected message. ``expect``: the counter it must bump at the receiving node(s)."""
+
+    topic: str
+    defect: str
+    stamp: Stamp
+    names: tuple[str, ...] = ()
+    fields: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    points: tuple[tuple[tuple[str, tuple[float, ...]], ...], ...] = ()
+    times_ns: tuple[int, ...] = ()
+    tfs_nanosec: int = 0
+    expect: str = "rejected"
+
+    def expected_counter(self, k: int) -> str:
+        """``rejected`` or ``out_of_order`` (a stale torque), given the plant's sample k."""
+        if self.expect == "out_of_order" and k - self.stamp.a < 0:
+            return "rejected"  # older than sample 0: a negative stamp
+        return self.expect
+
+    def build(self, k: int) -> Any:
+        if self.defect == "empty":
+            msg = (
+                JointState()
+                if self.topic != wire.TRAJECTORY_GOAL and self.topic != wire.SETPOINT
+                else JointTrajectory()
+            )
+            msg.header.frame_id = FUZZ
+            return msg
+        if self.topic in (wire.JOINT_STATES, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE):
+            msg = JointState(name=list(self.names), **{f: list(v) for f, v in self.fields})
+        else:
+            msg = JointTrajectory(joint_names=list(self.names))
+            for i, point in enumerate(self.points):
+                t = self.times_ns[i] if i < len(self.times_ns) else 0
+                sec, nanosec = divmod(t, wire.NS_PER_S)
+                p = JointTrajectoryPoint(
+                    time_from_start=Duration(sec=sec, nanosec=nanosec),
+                    **{f: list(v) for f, v in point},
+                )
+                if i == 0 and self.tfs_nanosec:
+                    p.time_from_start.nanosec = self.tfs_nanosec
+                msg.points.append(p)
+        msg.header.stamp = self.stamp.resolve(k)
+        msg.header.frame_id = FUZZ
+        return msg
+
+
+ANY_STAMP = ("rel", "neg", "offgrid", "nanosec", "stale")
+
+
+@st.composite
+def bad_joint_state(draw: Any) -> Garbage:
+    """Invalid on ``joint_states`` for both controllers (ff needs position, fb also velocity)."""
+    defect = draw(
+        st.sampled_from(
+            (
+                "empty",
+                *NAME_DEFECTS,
+                "len_position",
+                "len_velocity",
+                "len_effort",
+                "bad_position",
+                "bad_velocity",
+                "bad_effort",
+                "stamp",
+            )
+        )
+    )
+    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
+    position, velocity = vec(draw, N), vec(draw, N)
+    effort = vec(draw, N) if draw(st.booleans()) else []
+    if defect in NAME_DEFECTS:
+        names = apply_name_defect(draw, defect, names, [position, velocity, effort])
+    elif defect == "len_position":
+        position = vec(draw, draw(st.sampled_from((0, 1, 2, 4, 5))))
+    elif defect == "len_velocity":
+        velocity = vec(draw, draw(st.sampled_from((1, 2, 4))))
+    elif defect == "len_effort":
+        effort = vec(draw, draw(st.sampled_from((1, 2, 4))))
+    elif defect == "bad_position":
+        position = spoil(draw, position)
+    elif defect == "bad_velocity":
+        velocity = spoil(draw, velocity)
+    elif defect == "bad_effort":
+        effort = spoil(draw, vec(draw, N))
+    stamp = draw(
+        stamps(*(("neg", "offgrid", "nanosec", "stale") if defect == "stamp" else ANY_STAMP))
+    )
+    return Garbage(
+        wire.JOINT_STATES,
+        defect,
+        stamp,
+        tuple(names),
+        (("position", tuple(position)), ("velocity", tuple(velocity)), ("effort", tuple(effort))),
+    )
+
+
+@st.composite
+def bad_torque(draw: Any, topic: str) -> Garbage:
+    """Invalid on a torque topic (the plant), or a stale stamp the plant must ignore."""
+    defect = draw(
+        st.sampled_from(
+            (
+                "empty",
+                *NAME_DEFECTS,
+                "len_effort",
+                "bad_effort",
+                "has_position",
+                "has_velocity",
+                "stamp",
+                "stale",
+            )
+        )
+    )
+    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
+    effort = vec(draw, N, st.floats(-50.0, 50.0))
+    position: list[float] = []
+    velocity: list[float] = []
+    if defect in NAME_DEFECTS:
+        names = apply_name_defect(draw, defect, names, [effort])
+    elif defect == "len_effort":
+        effort = vec(draw, draw(st.sampled_from((0, 1, 2, 4))))
+    elif defect == "bad_effort":
+        effort = spoil(draw, effort)
+    elif defect == "has_position":
+        position = vec(draw, N)
+    elif defect == "has_velocity":
+        velocity = vec(draw, N)
+    if defect == "stamp":
+        stamp = draw(stamps("neg", "offgrid", "nanosec", "far"))
+    elif defect == "stale":
+        stamp = draw(stamps("stale"))
+    else:
+        stamp = draw(stamps(*ANY_STAMP))
+    return Garbage(
+        topic,
+        defect,
+        stamp,
+        tuple(names),
+        (("position", tuple(position)), ("velocity", tuple(velocity)), ("effort", tuple(effort))),
+        expect="out_of_order" if defect == "stale" else "rejected",
+    )
+
+
+SETPOINT_FIELDS = ("positions", "velocities", "accelerations", "effort")
+
+
+@st.composite
+def bad_setpoint(draw: Any) -> Garbage:
+    """Invalid on ``feedforward/setpoint`` (the feedback node)."""
+    defect = draw(
+        st.sampled_from(
+            (
+                "empty",
+                *NAME_DEFECTS,
+                "points0",
+                "points2",
+                *(f"len_{f}" for f in SETPOINT_FIELDS),
+                *(f"bad_{f}" for f in SETPOINT_FIELDS),
+                "tfs_nanosec",
+                "stamp",
+            )
+        )
+    )
+    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
+    cols = {f: vec(draw, N) for f in SETPOINT_FIELDS}
+    n_points = 1
+    tfs_nanosec = 0
+    if defect in NAME_DEFECTS:
+        names = apply_name_defect(draw, defect, names, list(cols.values()))
+    elif defect == "points0":
+        n_points = 0
+    elif defect == "points2":
+        n_points = 2
+    elif defect.startswith("len_"):
+        cols[defect[4:]] = vec(draw, draw(st.sampled_from((0, 1, 2, 4))))
+    elif defect.startswith("bad_"):
+        cols[defect[4:]] = spoil(draw, cols[defect[4:]])
+    elif defect == "tfs_nanosec":
+        tfs_nanosec = draw(st.integers(wire.NS_PER_S, 2**32 - 1))
+    stamp = draw(
+        stamps(*(("neg", "offgrid", "nanosec", "stale") if defect == "stamp" else ANY_STAMP))
+    )
+    point = tuple((f, tuple(v)) for f, v in cols.items())
+    return Garbage(
+        wire.SETPOINT,
+        defect,
+        stamp,
+        tuple(names),
+        points=(point,) * n_points,
+        times_ns=(draw(st.integers(0, 10**9)),) * n_points,
+        tfs_nanosec=tfs_nanosec,
+    )
+
+
+GOAL_FIELDS = ("positions", "velocities", "accelerations")
+
+
+@st.composite
+def bad_goal(draw: Any) -> Garbage:
+    """Invalid on ``feedforward/trajectory`` (the feedforward node)."""
+    defect = draw(
+        st.sampled_from(
+            (
+                "empty",
+                *NAME_DEFECTS,
+                "points0",
+                "times_not_increasing",
+                "first_time_not_positive",
+                "tfs_nanosec",
+                "len_positions",
+                "len_velocities",
+                "len_accelerations",
+                "velocities_some",
+                "bad_positions",
+                "bad_velocities",
+                "bad_accelerations",
+                "out_of_limits",
+                "final_velocity",
+            )
+        )
+    )
+    m = draw(st.integers(2 if defect in ("times_not_increasing", "velocities_some") else 1, 4))
+    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
+    order = [NAMES.index(name) for name in names]
+    times = list(np.cumsum([draw(st.integers(50, 500)) * 1_000_000 for _ in range(m)]))
+    inside = st.floats(0.0, 1.0)
+    points = []
+    with_vel, with_acc = draw(st.booleans()), draw(st.booleans())
+    for j in range(m):
+        pos = [LOWER[i] + 0.1 + draw(inside) * (UPPER[i] - LOWER[i] - 0.2) for i in order]
+        cols = {"positions": pos}
+        if with_vel:
+            cols["velocities"] = [0.0] * N if j == m - 1 else vec(draw, N, st.floats(-1, 1))
+        if with_acc:
+            cols["accelerations"] = vec(draw, N, st.floats(-1, 1))
+        points.append(cols)
+    tfs_nanosec = 0
+    j = draw(st.integers(0, m - 1))
+    if defect in NAME_DEFECTS:
+        defect_cols = [col for p in points for col in p.values()]
+        names = apply_name_defect(draw, defect, names, defect_cols)
+    elif defect == "points0":
+        points, times = [], []
+    elif defect == "times_not_increasing":
+        j = max(j, 1)
+        times[j] = times[j - 1] - draw(st.integers(0, times[j - 1]))
+    elif defect == "first_time_not_positive":
+        times[0] = -draw(st.integers(0, 10**9))
+    elif defect == "tfs_nanosec":
+        tfs_nanosec = draw(st.integers(wire.NS_PER_S, 2**32 - 1))
+    elif defect.startswith("len_"):
+        points[j][defect[4:]] = vec(draw, draw(st.sampled_from((1, 2, 4))))
+    elif defect == "velocities_some":
+        for p in points:
+            p["velocities"] = [0.0] * N
+        del points[j]["velocities"]
+    elif defect.startswith("bad_"):
+        points[j][defect[4:]] = spoil(draw, points[j].get(defect[4:], vec(draw, N)))
+    elif defect == "out_of_limits":
+        i = draw(st.integers(0, N - 1))
+        beyond = draw(st.floats(0.05, 1e5))
+        limit = LOWER[order[i]] - beyond if draw(st.booleans()) else UPPER[order[i]] + beyond
+        points[j]["positions"][i] = limit
+    elif defect == "final_velocity":
+        for p in points:
+            p.setdefault("velocities", [0.0] * N)
+        points[-1]["velocities"][draw(st.integers(0, N - 1))] = draw(st.floats(0.1, 2.0))
+    return Garbage(
+        wire.TRAJECTORY_GOAL,
+        defect,
+        Stamp("rel"),
+        tuple(names),
+        points=tuple(tuple((f, tuple(v)) for f, v in p.items()) for p in points),
+        times_ns=tuple(int(t) for t in times),
+        tfs_nanosec=tfs_nanosec,
+    )
+
+
+BATCH = st.fixed_dictionaries(
+    {
+        wire.JOINT_STATES: st.lists(bad_joint_state(), max_size=5),
+        wire.SETPOINT: st.lists(bad_setpoint(), max_size=5),
+        wire.FEEDFORWARD_TORQUE: st.lists(bad_torque(wire.FEEDFORWARD_TORQUE), max_size=5),
+        wire.FEEDBACK_TORQUE: st.lists(bad_torque(wire.FEEDBACK_TORQUE), max_size=5),
+        wire.TRAJECTORY_GOAL: st.lists(bad_goal(), max_size=3),
+    }
+)
+
+
+# ----------------------------------------------------------------------------------------------
+# Capture: the nodes' own output (frame_id != "fuzz"), and /diagnostics
+# ----------------------------------------------------------------------------------------------
+class Capture:
+    def __init__(self, graph: Graph) -> None:
+        self.node = graph.add(rclpy.create_node("capture", context=graph.context))
+        self.messages: dict[str, dict[int, list[Any]]] = {}
+        self.diagnostics: dict[str, dict[str, str]] = {}
+        for topic, msg_type in (
+            (wire.JOINT_STATES, JointState),
+            (wire.SETPOINT, JointTrajectory),
+            (wire.FEEDFORWARD_TORQUE, JointState),
+            (wire.FEEDBACK_TORQUE, JointState),
+            (wire.ESTIMATE, Float64MultiArray),
+        ):
+            self.messages[topic] = {}
+            self.node.create_subscription(
+                msg_type, topic, lambda m, t=topic: self._take(t, m), DEEP_QOS
+            )
+        self.node.create_subscription(
+            DiagnosticArray, wire.DIAGNOSTICS, self._diag, wire.DIAGNOSTICS_QOS
+        )
+
+    def _take(self, topic: str, msg: Any) -> None:
+        if topic == wire.ESTIMATE:
+            stamp = wire.msg_to_estimate(msg).stamp_ns
+        else:
+            if msg.header.frame_id == FUZZ:
+                return
+            stamp = wire.stamp_to_ns(msg.header.stamp)
+        self.messages[topic].setdefault(stamp, []).append(msg)
+
+    def _diag(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            self.diagnostics[status.name.rsplit("/", 1)[-1]] = {
+                kv.key: kv.value for kv in status.values
+            }
+
+    def hears(self, *topics: str) -> bool:
+        return all(self.node.count_publishers(self.node.resolve_topic_name(t)) >= 1 for t in topics)
+
+    def first(self, topic: str) -> dict[int, Any]:
+        """The first message per stamp; resends of a sample must be identical to it."""
+        out = {}
+        for stamp, msgs in self.messages[topic].items():
+            for other in msgs[1:]:
+                assert other == msgs[0], f"{topic} at {stamp} ns was published twice, differently"
+            out[stamp] = msgs[0]
+        return out
+
+
+def assert_all_finite(capture: Capture) -> None:
+    """Every number every node put on the wire is finite (and within the wire's bound)."""
+    for topic, by_stamp in capture.messages.items():
+        for stamp, msgs in by_stamp.items():
+            for msg in msgs:
+                if topic == wire.ESTIMATE:
+                    values = np.asarray(msg.data)
+                elif topic == wire.SETPOINT:
+                    values = np.concatenate(
+                        [np.asarray(getattr(msg.points[0], f)) for f in SETPOINT_FIELDS]
+                    )
+                else:
+                    values = np.concatenate(
+                        [np.asarray(msg.position), np.asarray(msg.velocity), np.asarray(msg.effort)]
+                    )
+                assert np.all(np.isfinite(values)), f"non-finite value on {topic} at {stamp}"
+                if topic != wire.ESTIMATE:  # trace(P) and the stamp may exceed 1e6
+                    assert np.all(np.abs(values) <= wire.DEFAULT_MAX_ABS), (topic, stamp)
+
+
+def compare_with_offline(capture: Capture, offline: Any) -> None:
+    """Bit for bit: every captured signal equals the offline loop's (the clean run)."""
+    n = len(offline.t)
+    js = capture.first(wire.JOINT_STATES)
+    sp = capture.first(wire.SETPOINT)
+    ff = capture.first(wire.FEEDFORWARD_TORQUE)
+    fb = capture.first(wire.FEEDBACK_TORQUE)
+    est = capture.first(wire.ESTIMATE)
+    stamps_ns = [k * T_NS for k in range(n)]
+    assert sorted(js) == stamps_ns
+    assert sorted(sp) == sorted(ff) == sorted(fb) == sorted(est) == stamps_ns
+    for k, stamp in enumerate(stamps_ns):
+        s = wire.joint_state_to_arrays(js[stamp], NAMES)
+        np.testing.assert_array_equal(s.position, offline.q[k])
+        np.testing.assert_array_equal(s.velocity, offline.qd[k])
+        if k == 0:
+            assert s.effort is None
+        else:
+            np.testing.assert_array_equal(s.effort, offline.applied[k - 1])
+        p = wire.msg_to_setpoint(sp[stamp], NAMES)
+        for name, got in (("q_d", p.q), ("qd_d", p.qd), ("qdd_d", p.qdd), ("u_n", p.u_n)):
+            np.testing.assert_array_equal(got, getattr(offline, name)[k], err_msg=f"{name}[{k}]")
+        np.testing.assert_array_equal(wire.msg_to_torque(ff[stamp], NAMES).effort, offline.u_n[k])
+        np.testing.assert_array_equal(wire.msg_to_torque(fb[stamp], NAMES).effort, offline.du[k])
+        e = wire.msg_to_estimate(est[stamp])
+        assert e.trace_p == offline.trace_p[k]
+        np.testing.assert_array_equal(e.F, offline.F[k])
+        np.testing.assert_array_equal(e.G, offline.G[k])
+        np.testing.assert_array_equal(e.w, offline.w[k])
+
+
+# ----------------------------------------------------------------------------------------------
+# 1. The fuzz: garbage on every topic during a lockstep run
+# ----------------------------------------------------------------------------------------------
+def _start_lockstep(graph: Graph, spec: RunSpec) -> tuple[Any, Any, Any, Capture]:
+    params = spec.node_parameters()
+    ctx = graph.context
+    ff = graph.add(
+        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+    )
+    fb = graph.add(
+        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+    )
+    capture = Capture(graph)
+    topics = [wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE]
+    if spec.controller == "adaptive":
+        topics.append(wire.ESTIMATE)
+    graph.spin_until(lambda: capture.hears(*topics), what="discovery of the controllers")
+    # wait_for_subscribers = 3: ff, fb and the capture listen to joint_states.
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params["plant_node"])))
+    return ff, fb, plant, capture
+
+
+def test_fuzz_garbage_on_every_topic_leaves_a_lockstep_run_bit_identical(graph):
+    scenario = paper_scenario("c", hold_s=1.0)
+    settings_ = paper_settings(1.5e5)
+    ff, fb, plant, capture = _start_lockstep(
+        graph, RunSpec(scenario, "adaptive", settings_, "lockstep", name="fuzz")
+    )
+    injector = graph.add(rclpy.create_node("injector", context=graph.context))
+    pubs = {
+        topic: injector.create_publisher(msg_type, topic, DEEP_QOS)
+        for topic, msg_type in (
+            (wire.JOINT_STATES, JointState),
+            (wire.SETPOINT, JointTrajectory),
+            (wire.FEEDFORWARD_TORQUE, JointState),
+            (wire.FEEDBACK_TORQUE, JointState),
+            (wire.TRAJECTORY_GOAL, JointTrajectory),
+        )
+    }
+    wanted = {
+        wire.JOINT_STATES: 3,  # ff, fb, capture
+        wire.SETPOINT: 2,  # fb, capture
+        wire.FEEDFORWARD_TORQUE: 2,  # plant, capture
+        wire.FEEDBACK_TORQUE: 2,
+        wire.TRAJECTORY_GOAL: 1,  # ff
+    }
+    graph.spin_until(
+        lambda: all(pubs[t].get_subscription_count() >= c for t, c in wanted.items()),
+        what="discovery of the injector",
+    )
+    # (node, counter key) -> expected value; every counter starts at 0 in a clean run.
+    expected: dict[tuple[str, str], int] = {}
+    nodes = {"ff": ff, "fb": fb, "plant": plant}
+    receivers = {
+        wire.JOINT_STATES: ("ff", "fb"),
+        wire.SETPOINT: ("fb",),
+        wire.FEEDFORWARD_TORQUE: ("plant",),
+        wire.FEEDBACK_TORQUE: ("plant",),
+        wire.TRAJECTORY_GOAL: ("ff",),
+    }
+    injected = {"n": 0}
+
+    def got(who: str, key: str) -> int:
+        return counter(nodes[who], key)
+
+    @settings(
+        max_examples=350,
+        deadline=None,
+        database=None,
+        phases=(Phase.generate,),
+        suppress_health_check=list(HealthCheck),
+    )
+    @given(batch=BATCH)
+    def inject(batch: dict[str, list[Garbage]]) -> None:
+        k = plant.k
+        for topic, garbage in batch.items():
+            for g in garbage:
+                pubs[topic].publish(g.build(k))
+                injected["n"] += 1
+                kind = g.expected_counter(k)
+                for who in receivers[topic]:
+                    for key in (f"{kind}.{topic}", kind):
+                        if key != "out_of_order":
+                            expected[(who, key)] = expected.get((who, key), 0) + 1
+        deadline = time.monotonic() + 10.0
+        while any(got(w, key) < v for (w, key), v in expected.items()):
+            assert time.monotonic() < deadline, {
+                f"{w}:{key}": (got(w, key), v)
+                for (w, key), v in expected.items()
+                if got(w, key) != v
+            }
+            graph.executor.spin_once(timeout_sec=0.005)
+        for (who, key), value in expected.items():
+            if key.startswith("out_of_order"):
+                assert got(who, key) >= value, (who, key)
+            else:
+                assert got(who, key) == value, (who, key, got(who, key), value, batch)
+        for node in nodes.values():
+            assert errors(node) == 0, node.diagnostics.counters
+
+    inject()
+    graph.spin_until(lambda: plant.done, timeout_s=60, what="the end of the run")
+    assert plant.exit_code == 0, plant.diagnostics.message
+    graph.spin_for(0.2)  # the final sample's torques reach the capture
+    assert injected["n"] >= 2000, injected
+    assert_all_finite(capture)
+    compare_with_offline(capture, run_offline(scenario, "adaptive", settings_))
+    # The counters are on a real /diagnostics message (published once a second).
+    graph.spin_until(
+        lambda: all(
+            int(capture.diagnostics.get(name, {}).get("rejected", 0)) > 0
+            for name in ("feedforward_node", "feedback_node", "plant_node")
+        ),
+        timeout_s=5,
+        what="rejected counters on /diagnostics",
+    )
+    for name, node in (("feedforward_node", ff), ("feedback_node", fb), ("plant_node", plant)):
+        published = capture.diagnostics[name]
+        assert 0 < int(published["rejected"]) <= counter(node, "rejected")
+        assert any(key.startswith("rejected.") for key in published)
+
+
+# ----------------------------------------------------------------------------------------------
+# The controllers driven by a stand-in plant: stale/duplicate stamps, extreme goals
+# ----------------------------------------------------------------------------------------------
+class StandInPlant:
+    """Publishes ``joint_states`` (and, optionally, set points) like a plant (and feedforward);
+    records what the controllers answer, by stamp."""
+
+    def __init__(self, graph: Graph) -> None:
+        self.graph = graph
+        self.node = graph.add(rclpy.create_node("stand_in", context=graph.context))
+        self.js_pub = self.node.create_publisher(JointState, wire.JOINT_STATES, DEEP_QOS)
+        self.sp_pub = self.node.create_publisher(JointTrajectory, wire.SETPOINT, DEEP_QOS)
+        self.goal_pub = self.node.create_publisher(
+            JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
+        )
+        self.got: dict[str, dict[int, list[Any]]] = {}
+        for topic, msg_type in (
+            (wire.SETPOINT, JointTrajectory),
+            (wire.FEEDFORWARD_TORQUE, JointState),
+            (wire.FEEDBACK_TORQUE, JointState),
+            (wire.ESTIMATE, Float64MultiArray),
+        ):
+            self.got[topic] = {}
+            self.node.create_subscription(
+                msg_type, topic, lambda m, t=topic: self._take(t, m), DEEP_QOS
+            )
+
+    def _take(self, topic: str, msg: Any) -> None:
+        if topic == wire.ESTIMATE:
+            stamp = wire.msg_to_estimate(msg).stamp_ns
+        elif msg.header.frame_id == FUZZ:
+            return
+        else:
+            stamp = wire.stamp_to_ns(msg.header.stamp)
+        self.got[topic].setdefault(stamp, []).append(msg)
+
+    def count(self, topic: str, stamp_ns: int) -> int:
+        return len(self.got[topic].get(stamp_ns, []))
+
+    def joint_state(self, stamp_ns: int, q: Any, qd: Any, effort: Any = None) -> None:
+        msg = JointState(name=list(NAMES), position=[float(v) for v in q])
+        msg.velocity = [float(v) for v in qd]
+        if effort is not None:
+            msg.effort = [float(v) for v in effort]
+        msg.header.stamp = wire.ns_to_stamp(stamp_ns)
+        self.js_pub.publish(msg)
+
+    def setpoint(self, stamp_ns: int, q_d: Any, qd_d: Any, qdd_d: Any, u_n: Any) -> None:
+        self.sp_pub.publish(wire.setpoint_to_msg(stamp_ns, NAMES, q_d, qd_d, qdd_d, u_n, 0))
+
+
+def test_stale_duplicate_and_off_grid_joint_states(graph):
+    """ff and fb: a re-sent sample is answered from the cache (identical output), an older one,
+    a negative one and one off the grid are rejected and counted; nothing else is published."""
+    params = RunSpec(paper_scenario("a"), "pd").node_parameters()
+    ctx = graph.context
+    ff = graph.add(
+        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+    )
+    fb = graph.add(
+        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+    )
+    plant = StandInPlant(graph)
+    graph.spin_until(lambda: plant.js_pub.get_subscription_count() >= 2)
+    graph.spin_until(lambda: plant.node.count_publishers(wire.FEEDBACK_TORQUE) >= 1)
+    q0 = np.deg2rad(paper_scenario("a").q_start_deg)
+
+    def answered(stamp: int, times: int = 1) -> bool:
+        return all(
+            plant.count(t, stamp) >= times
+            for t in (wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE)
+        )
+
+    for k in (0, 1):
+        plant.joint_state(k * T_NS, q0, np.zeros(N))
+        graph.spin_until(lambda k=k: answered(k * T_NS))
+    # Sample 1 again, with other values: a resend; both answer from their cache.
+    plant.joint_state(T_NS, q0 + 0.5, np.ones(N))
+    graph.spin_until(lambda: answered(T_NS, 2))
+    for topic in (wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE):
+        first, again = plant.got[topic][T_NS]
+        assert first == again, topic
+    # Older than the last sample, negative, off the grid: rejected by both.
+    for stamp in (0, -T_NS, T_NS + T_NS // 2):
+        plant.joint_state(stamp, q0, np.zeros(N))
+    graph.spin_until(lambda: counter(ff, "rejected.joint_states") == 3)
+    graph.spin_until(lambda: counter(fb, "rejected.joint_states") == 3)
+    plant.joint_state(2 * T_NS, q0, np.zeros(N))
+    graph.spin_until(lambda: answered(2 * T_NS))
+    graph.spin_for(0.1)
+    for node in (ff, fb):
+        assert counter(node, "resent") == 1
+        assert counter(node, "rejected") == 3
+        assert errors(node) == 0
+    assert sorted(plant.got[wire.FEEDBACK_TORQUE]) == [0, T_NS, 2 * T_NS]
+    assert sorted(plant.got[wire.SETPOINT]) == [0, T_NS, 2 * T_NS]
+
+
+def test_feedback_keeps_the_first_of_two_states_with_one_stamp(graph):
+    """Two different joint states for a sample the feedback still waits on: the first stands."""
+    params = RunSpec(paper_scenario("a"), "pd").node_parameters()["feedback_node"]
+    fb = graph.add(FeedbackNode(context=graph.context, parameter_overrides=_overrides(params)))
+    plant = StandInPlant(graph)
+    graph.spin_until(lambda: plant.sp_pub.get_subscription_count() >= 1)
+    graph.spin_until(lambda: plant.node.count_publishers(wire.FEEDBACK_TORQUE) >= 1)
+    q_d = np.array([0.1, -0.2, 0.3])
+    e = np.array([0.01, -0.02, 0.03])
+    plant.joint_state(0, q_d - e, np.zeros(N))
+    plant.joint_state(0, q_d + e, np.zeros(N))
+    graph.spin_until(lambda: counter(fb, "duplicate.joint_states") == 1)
+    plant.setpoint(0, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: plant.count(wire.FEEDBACK_TORQUE, 0) == 1)
+    du = wire.msg_to_torque(plant.got[wire.FEEDBACK_TORQUE][0][0], NAMES).effort
+    np.testing.assert_array_equal(du, 100.0 * (q_d - (q_d - e)))  # Kp (q_d - q), first state
+    # A set point for a sample that is done: ignored; an older one: rejected.
+    plant.joint_state(T_NS, q_d, np.zeros(N))
+    plant.setpoint(T_NS, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: plant.count(wire.FEEDBACK_TORQUE, T_NS) == 1)
+    plant.setpoint(0, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: counter(fb, "rejected.feedforward/setpoint") == 1)
+    assert errors(fb) == 0
+
+
+def extreme_goal() -> st.SearchStrategy[JointTrajectory]:
+    """Goals that pass the wire's checks but may be absurdly fast: waypoints inside the joint
+    limits (or just outside), 1 ns to 50 ms apart, velocities/accelerations up to 1e5."""
+
+    @st.composite
+    def build(draw: Any) -> JointTrajectory:
+        m = draw(st.integers(1, 3))
+        t = 0
+        msg = JointTrajectory(joint_names=list(NAMES))
+        msg.header.frame_id = FUZZ
+        big = st.one_of(st.floats(-1e5, 1e5), st.sampled_from([-1e5, -1e4, 1e3, 1e4, 1e5]))
+        with_vel, with_acc = draw(st.booleans()), draw(st.booleans())
+        for j in range(m):
+            t += draw(
+                st.one_of(
+                    st.integers(1, 1000),  # ns apart: everything happens between two samples
+                    st.integers(1, 5).map(lambda j: j * T_NS),  # on samples: their values show
+                    st.integers(1, 50_000_000),
+                )
+            )
+            pos = [draw(st.floats(float(LOWER[i]) - 0.2, float(UPPER[i]) + 0.2)) for i in range(N)]
+            point = JointTrajectoryPoint(positions=pos, time_from_start=wire.ns_to_duration(t))
+            if with_vel:
+                point.velocities = [0.0] * N if j == m - 1 else [draw(big) for _ in range(N)]
+            if with_acc:
+                point.accelerations = [draw(big) for _ in range(N)]
+            msg.points.append(point)
+        return msg
+
+    return build()
+
+
+def test_fuzz_extreme_goals_never_put_a_non_finite_value_on_the_wire(graph):
+    """Valid-looking but absurd goals (hypothesis): each is rejected or run; every joint state
+    is answered with finite set points and torques (ff), and fb either answers with a finite
+    torque or refuses a torque beyond the wire's bound (counted) -- nothing raises."""
+    params = RunSpec(paper_scenario("a"), "pd").node_parameters()
+    ctx = graph.context
+    ff = graph.add(
+        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+    )
+    fb = graph.add(
+        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+    )
+    plant = StandInPlant(graph)
+    graph.spin_until(lambda: plant.goal_pub.get_subscription_count() >= 1)
+    graph.spin_until(lambda: plant.js_pub.get_subscription_count() >= 2)
+    graph.spin_until(lambda: plant.node.count_publishers(wire.FEEDBACK_TORQUE) >= 1)
+    state = {"k": 0, "q": np.deg2rad(paper_scenario("a").q_start_deg), "qd": np.zeros(N)}
+
+    def step() -> None:
+        k = state["k"]
+        stamp = k * T_NS
+        refused = counter(fb, "rejected.feedback_law")
+        plant.joint_state(stamp, state["q"], state["qd"])
+        graph.spin_until(
+            lambda: (
+                plant.count(wire.FEEDFORWARD_TORQUE, stamp) == 1
+                and (
+                    plant.count(wire.FEEDBACK_TORQUE, stamp) == 1
+                    or counter(fb, "rejected.feedback_law") > refused
+                )
+            ),
+            timeout_s=5,
+            what=f"answers to sample {k}",
+        )
+        sp = wire.msg_to_setpoint(plant.got[wire.SETPOINT][stamp][0], NAMES)  # finite, bounded
+        wire.msg_to_torque(plant.got[wire.FEEDFORWARD_TORQUE][stamp][0], NAMES)
+        if plant.count(wire.FEEDBACK_TORQUE, stamp):
+            wire.msg_to_torque(plant.got[wire.FEEDBACK_TORQUE][stamp][0], NAMES)
+        # The arm lags the set point a little, so the feedback has something to do.
+        state["q"] = np.clip(sp.q + 0.01, -1e5, 1e5)
+        state["qd"] = np.clip(0.5 * sp.qd, -1e5, 1e5)
+        state["k"] = k + 1
+
+    step()
+
+    @settings(
+        max_examples=40,
+        deadline=None,
+        database=None,
+        phases=(Phase.generate,),
+        suppress_health_check=list(HealthCheck),
+    )
+    @given(goal=extreme_goal())
+    def run(goal: JointTrajectory) -> None:
+        handled = counter(ff, "goals_accepted") + counter(ff, "rejected.feedforward/trajectory")
+        plant.goal_pub.publish(goal)
+        graph.spin_until(
+            lambda: (
+                counter(ff, "goals_accepted") + counter(ff, "rejected.feedforward/trajectory")
+                > handled
+            ),
+            timeout_s=5,
+            what="the goal to be handled",
+        )
+        # Run until the goal (if accepted) has started and ended.
+        for _ in range(200):
+            step()
+            queued = counter(ff, "goals_accepted") - counter(ff, "goals_started")
+            rejected_late = counter(ff, "rejected.feedforward/trajectory")
+            assert ff.feedforward is not None
+            if state["k"] >= ff.feedforward.end_k() and queued <= rejected_late:
+                break
+        for node in (ff, fb):
+            assert errors(node) == 0, node.diagnostics.counters
+
+    run()
+    assert counter(ff, "goals_accepted") > 0
+    assert counter(ff, "rejected.feedforward/trajectory") > 0
+    assert counter(ff, "samples") == state["k"]
+
+
+def test_goal_too_fast_for_the_wire_is_dropped_and_the_last_set_point_held(graph):
+    """A goal whose set points would exceed the wire's bound at a sample (here the nominal
+    torque of 1e4 rad/s): the feedforward drops it, holds its last set point and counts it."""
+    params = RunSpec(paper_scenario("a"), "none").node_parameters()["feedforward_node"]
+    del params["move.goal_deg"]  # hold the first measured position: the goal starts at once
+    ff = graph.add(FeedforwardNode(context=graph.context, parameter_overrides=_overrides(params)))
+    plant = StandInPlant(graph)
+    graph.spin_until(lambda: plant.goal_pub.get_subscription_count() >= 1)
+    graph.spin_until(lambda: plant.node.count_publishers(wire.FEEDFORWARD_TORQUE) >= 1)
+    q0 = np.deg2rad(paper_scenario("a").q_start_deg)
+    goal = JointTrajectory(joint_names=list(NAMES))
+    for t_ms, dq, v in ((100, 0.1, 1e4), (200, 0.2, 0.0)):
+        goal.points.append(
+            JointTrajectoryPoint(
+                positions=list(q0 + dq),
+                velocities=[v] * N,
+                time_from_start=wire.ns_to_duration(t_ms * 1_000_000),
+            )
+        )
+    plant.goal_pub.publish(goal)
+    graph.spin_until(lambda: counter(ff, "goals_accepted") == 1)
+    for k in range(25):
+        plant.joint_state(k * T_NS, q0, np.zeros(N))
+        graph.spin_until(lambda k=k: plant.count(wire.FEEDFORWARD_TORQUE, k * T_NS) == 1)
+    assert counter(ff, "plan_errors") >= 1
+    assert errors(ff) == 0
+    setpoints = [
+        wire.msg_to_setpoint(plant.got[wire.SETPOINT][k * T_NS][0], NAMES) for k in range(25)
+    ]
+    # After the failure the set point is held at rest.
+    np.testing.assert_array_equal(setpoints[-1].q, setpoints[-2].q)
+    np.testing.assert_array_equal(setpoints[-1].qd, np.zeros(N))
+
+
+# ----------------------------------------------------------------------------------------------
+# The plant: stamps of torques, duplicates, torque limits
+# ----------------------------------------------------------------------------------------------
+def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(graph):
+    """Lockstep plant, the test playing both controllers: a torque before sample 0 is sent, in
+    the future, off the grid or negative is rejected; an answer to an integrated sample is
+    ignored (stale / out of order); a second torque for the current sample does not replace or
+    add to the first; a huge valid torque is clipped to the URDF limits and counted."""
+    from apc_plant_sim.plant import Plant
+    from apc_plant_sim.scenario import build
+
+    scenario = paper_scenario("a")
+    params = RunSpec(scenario, "none").node_parameters()["plant_node"]
+    params.update(wait_for_subscribers=2, n_samples=0, resend_s=30.0, lockstep_timeout_s=30.0)
+    ctx = graph.context
+    helper = graph.add(rclpy.create_node("controllers", context=ctx))
+    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
+    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
+    states: dict[int, Any] = {}
+    helper.create_subscription(
+        JointState,
+        wire.JOINT_STATES,
+        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
+        DEEP_QOS,
+    )
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
+    graph.spin_until(
+        lambda: ff_pub.get_subscription_count() >= 1 and fb_pub.get_subscription_count() >= 1
+    )
+
+    def torque(pub: Any, stamp_ns: int, effort: Any) -> None:
+        pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
+
+    ff_key, fb_key = f"rejected.{wire.FEEDFORWARD_TORQUE}", f"rejected.{wire.FEEDBACK_TORQUE}"
+    # Before the plant sent sample 0 (it waits for a second listener): nobody computed this.
+    torque(ff_pub, 0, np.zeros(N))
+    graph.spin_until(lambda: counter(plant, ff_key) == 1)
+    assert not plant.started
+    graph.add(rclpy.create_node("listener", context=ctx)).create_subscription(
+        JointState, wire.JOINT_STATES, lambda m: None, DEEP_QOS
+    )
+    graph.spin_until(lambda: 0 in states, what="sample 0")
+
+    built = build(scenario)
+    reference = Plant(built.plant_robot, built.plant_config, np.deg2rad(scenario.q_start_deg))
+    a = np.array([5.0, 40.0, 10.0])
+    # Sample 0: two different feedforward torques; the first stands, nothing is added.
+    torque(ff_pub, 0, a)
+    torque(ff_pub, 0, 3.0 * a)
+    graph.spin_until(lambda: counter(plant, f"duplicate.{wire.FEEDFORWARD_TORQUE}") == 1)
+    torque(fb_pub, 0, np.zeros(N))
+    graph.spin_until(lambda: T_NS in states, what="sample 1")
+    step = reference.step(a)
+    got = wire.joint_state_to_arrays(
+        states[T_NS], NAMES, require=("position", "velocity", "effort")
+    )
+    np.testing.assert_array_equal(got.position, step.q)
+    np.testing.assert_array_equal(got.velocity, step.qd)
+    np.testing.assert_array_equal(got.effort, a)
+
+    # Sample 1: future, off grid, negative -> rejected; answers to sample 0 -> stale.
+    for stamp in (2 * T_NS, T_NS + 5, -T_NS):
+        torque(ff_pub, stamp, a)
+    torque(ff_pub, 0, a)
+    torque(fb_pub, 0, np.zeros(N))
+    graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDBACK_TORQUE}") == 1)
+    graph.spin_until(lambda: counter(plant, ff_key) == 4)
+    graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDFORWARD_TORQUE}") == 1)
+    torque(ff_pub, T_NS, a)
+    torque(fb_pub, T_NS, np.zeros(N))
+    graph.spin_until(lambda: 2 * T_NS in states, what="sample 2")
+    reference.step(a)
+
+    # Sample 2: an answer to sample 0 is out of order; the rejected future torque for sample 2
+    # was not kept: with the feedback torque alone the plant does not step.
+    torque(ff_pub, 0, a)
+    torque(fb_pub, 2 * T_NS, np.zeros(N))
+    graph.spin_until(lambda: counter(plant, f"out_of_order.{wire.FEEDFORWARD_TORQUE}") == 1)
+    graph.spin_for(0.3)
+    assert plant.k == 2
+    # A huge but valid torque is clipped to the effort limits, and counted.
+    huge = np.array([1e5, -1e5, 1e5])
+    torque(ff_pub, 2 * T_NS, huge)
+    graph.spin_until(lambda: 3 * T_NS in states, what="sample 3")
+    limit = built.plant_robot.effort_limit
+    applied = wire.joint_state_to_arrays(states[3 * T_NS], NAMES).effort
+    np.testing.assert_array_equal(applied, np.sign(huge) * limit)
+    step = reference.step(huge)
+    np.testing.assert_array_equal(
+        wire.joint_state_to_arrays(states[3 * T_NS], NAMES).position, step.q
+    )
+    assert counter(plant, "saturated_samples") == 1
+    assert all(counter(plant, f"saturated.{name}") == 1 for name in NAMES)
+    assert counter(plant, fb_key) == 0
+    assert counter(plant, "rejected") == 4
+    assert errors(plant) == 0
+
+
+def test_torque_limits_hold_in_a_recorded_run(tmp_path):
+    """PD with absurd gains in a lockstep run: every applied torque in the recording is within
+    the URDF's effort limits, and saturation is on the recorded /diagnostics."""
+    from apc_msgs_py.bag import read_messages
+    from apc_plant_sim.experiment import run_in_process
+    from apc_plant_sim.recording import load_run
+
+    spec = RunSpec(
+        paper_scenario("c", hold_s=0.2), "pd", {"kp": 1e6, "kv": 1e4}, "lockstep", name="sat"
+    )
+    outcome = run_in_process(spec, tmp_path, progress=False, timeout_s=60)
+    assert outcome.ok, outcome.message
+    run = load_run(outcome.path)
+    limit = ROBOT.effort_limit
+    effort = run.effort[1:]
+    assert np.all(np.isfinite(effort))
+    assert np.all(np.abs(effort) <= limit)
+    saturated_rows = np.any(np.abs(effort) == limit, axis=1)
+    assert saturated_rows.sum() > 10
+    plant_status = None
+    for message in read_messages(outcome.path, topics=["/diagnostics"]):
+        for status in message.decode().status:
+            if status.name.endswith("plant_node"):
+                plant_status = {kv.key: kv.value for kv in status.values}
+    assert plant_status is not None, "the plant's final /diagnostics was not recorded"
+    assert int(plant_status["saturated_samples"]) == saturated_rows.sum()
+    assert any(int(plant_status.get(f"saturated.{name}", 0)) > 0 for name in NAMES)
+
+
+# ----------------------------------------------------------------------------------------------
+# 2. Runtime parameters of the feedback node
+# ----------------------------------------------------------------------------------------------
+class ParameterRig:
+    """A feedback node, a stand-in plant + feedforward, and a parameter client (the service)."""
+
+    def __init__(self, graph: Graph, controller: str, settings_: dict | None = None) -> None:
+        from rclpy.parameter_client import AsyncParameterClient
+
+        params = RunSpec(paper_scenario("a"), controller, settings_).node_parameters()
+        self.graph = graph
+        self.fb = graph.add(
+            FeedbackNode(
+                context=graph.context, parameter_overrides=_overrides(params["feedback_node"])
+            )
+        )
+        self.plant = StandInPlant(graph)
+        self.client = AsyncParameterClient(self.plant.node, "feedback_node")
+        graph.spin_until(lambda: self.client.services_are_ready(), what="parameter services")
+        graph.spin_until(lambda: self.plant.sp_pub.get_subscription_count() >= 1)
+        graph.spin_until(lambda: self.plant.node.count_publishers(wire.FEEDBACK_TORQUE) >= 1)
+        self.k = 0
+
+    def set(self, *parameters: Parameter, atomically: bool = False) -> list[Any]:
+        call = self.client.set_parameters_atomically if atomically else self.client.set_parameters
+        future = call(list(parameters))
+        self.graph.spin_until(future.done, what="set_parameters")
+        response = future.result()
+        return [response.result] if atomically else list(response.results)
+
+    def sample(self, q: Any, qd: Any, q_d: Any, qd_d: Any, u_n: Any, effort: Any = None) -> Any:
+        """One sample; returns the published du (None if the node refused to publish)."""
+        stamp = self.k * T_NS
+        self.k += 1
+        refused = counter(self.fb, "rejected.feedback_law")
+        self.plant.joint_state(stamp, q, qd, effort)
+        self.plant.setpoint(stamp, q_d, qd_d, np.zeros(N), u_n)
+        with_estimate = self.fb.kind == "adaptive"
+        self.graph.spin_until(
+            lambda: (
+                (
+                    self.plant.count(wire.FEEDBACK_TORQUE, stamp) == 1
+                    and (not with_estimate or self.plant.count(wire.ESTIMATE, stamp) == 1)
+                )
+                or counter(self.fb, "rejected.feedback_law") > refused
+            )
+        )
+        if not self.plant.count(wire.FEEDBACK_TORQUE, stamp):
+            return None
+        return wire.msg_to_torque(self.plant.got[wire.FEEDBACK_TORQUE][stamp][0], NAMES).effort
+
+
+def assert_refused(results: list[Any], name: str, why: str) -> None:
+    assert len(results) == 1 and not results[0].successful, results
+    assert name in results[0].reason and why in results[0].reason, results[0].reason
+
+
+def test_pd_gains_change_at_run_time_and_bad_values_are_refused(graph):
+    rig = ParameterRig(graph, "pd")
+    q_d, qd_d = np.array([0.2, -0.3, 0.4]), np.array([0.1, 0.0, -0.1])
+    q, qd = q_d - np.array([0.01, -0.02, 0.005]), qd_d.copy()
+    du0 = rig.sample(q, qd, q_d, qd_d, np.zeros(N))
+    np.testing.assert_array_equal(du0, 100.0 * (q_d - q) + 20.0 * (qd_d - qd))
+    assert all(r.successful for r in rig.set(Parameter("gains.kp", value=200.0)))
+    du1 = rig.sample(q, qd, q_d, qd_d, np.zeros(N))
+    np.testing.assert_array_equal(du1, 2.0 * du0)  # the P term doubled (qd = qd_d)
+    # An integer is fine for a double (what `ros2 param set ... gains.kv 40` sends).
+    assert all(r.successful for r in rig.set(Parameter("gains.kv", value=40)))
+    qd = qd_d + 0.05
+    du2 = rig.sample(q, qd, q_d, qd_d, np.zeros(N))
+    np.testing.assert_array_equal(du2, 200.0 * (q_d - q) + 40.0 * (qd_d - qd))
+    # Refused, each with a reason naming the parameter; the law keeps its gains.
+    assert_refused(rig.set(Parameter("gains.kp", value=-1.0)), "gains.kp", "out of range")
+    assert_refused(rig.set(Parameter("gains.kp", value=math.nan)), "gains.kp", "out of range")
+    assert_refused(rig.set(Parameter("gains.kp", value="fast")), "gains.kp", "must be a number")
+    assert_refused(rig.set(Parameter("gains.kv", value=True)), "gains.kv", "must be a number")
+    assert_refused(rig.set(Parameter("gains.kv", value=[1.0, 2.0])), "gains.kv", "number")
+    assert_refused(rig.set(Parameter("adaptive.r", value=1.0)), "adaptive.r", "not used")
+    for name, value in (
+        ("period", 0.02),
+        ("controller", "adaptive"),
+        ("adaptive.rho", 0.5),
+        ("robot_description_path", "other.urdf"),
+        ("inertia_error", [0.0, 0.0, 0.0]),
+    ):
+        assert_refused(rig.set(Parameter(name, value=value)), name, "read-only")
+    np.testing.assert_array_equal(rig.sample(q, qd, q_d, qd_d, np.zeros(N)), du2)
+    assert rig.fb.get_parameter("gains.kp").value == 200.0
+    # Gains that make du exceed the wire's bound: the node publishes nothing and counts it.
+    assert all(r.successful for r in rig.set(Parameter("gains.kp", value=1e9)))
+    assert rig.sample(q, qd, q_d, qd_d, np.zeros(N)) is None
+    assert counter(rig.fb, "rejected.feedback_law") == 1
+    assert all(r.successful for r in rig.set(Parameter("gains.kp", value=200.0)))
+    np.testing.assert_array_equal(rig.sample(q, qd, q_d, qd_d, np.zeros(N)), du2)
+    assert counter(rig.fb, "parameter_updates") == 4
+    assert errors(rig.fb) == 0
+
+
+def test_adaptive_weights_change_at_run_time_keeping_the_identifier(graph):
+    """New Q and R act from the next sample, on the identified model as it is (checked with
+    the published estimate); an atomic set with one bad value changes nothing."""
+    from apc_feedback.optimal import one_step_control
+
+    settings_ = paper_settings(1.5e5)
+    rig = ParameterRig(graph, "adaptive", settings_)
+
+    def weights(q_position: float, q_velocity: float, r: float) -> tuple[np.ndarray, np.ndarray]:
+        return np.diag([q_position] * N + [q_velocity] * N), r * np.eye(N)
+
+    q_d, qd_d, u_n = np.array([0.3, -0.5, -0.8]), np.zeros(N), np.array([5.0, 30.0, 10.0])
+    applied = None
+
+    def check(k: int, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
+        nonlocal applied
+        e = 1e-3 * (k + 1) * np.array([1.0, -1.0, 0.5])
+        q, qd = q_d + e, 0.1 * e
+        du = rig.sample(q, qd, q_d, qd_d, u_n, applied)
+        est = wire.msg_to_estimate(rig.plant.got[wire.ESTIMATE][(rig.k - 1) * T_NS][0])
+        dx = np.concatenate([q - q_d, qd - qd_d])
+        expected = one_step_control(est.F, est.G, est.w, Q, R, dx, "exact")
+        np.testing.assert_allclose(du, expected, rtol=1e-12, atol=0)
+        applied = u_n + du
+        return du
+
+    Q1, R1 = weights(0.1, 0.1, 1e-6)
+    for k in range(5):
+        check(k, Q1, R1)
+    results = rig.set(
+        Parameter("adaptive.q_position", value=10.0),
+        Parameter("adaptive.r", value=1e-4),
+        atomically=True,
+    )
+    assert results[0].successful, results
+    Q2, R2 = weights(10.0, 0.1, 1e-4)
+    check(5, Q2, R2)
+    # One bad value in an atomic set: nothing changes.
+    results = rig.set(
+        Parameter("adaptive.q_velocity", value=5.0),
+        Parameter("adaptive.r", value=0.0),
+        atomically=True,
+    )
+    assert_refused(results, "adaptive.r", "out of range")
+    check(6, Q2, R2)
+    assert_refused(rig.set(Parameter("adaptive.r", value=-1.0)), "adaptive.r", "out of range")
+    assert_refused(
+        rig.set(Parameter("adaptive.q_velocity", value=-0.1)), "adaptive.q_velocity", "range"
+    )
+    assert_refused(
+        rig.set(Parameter("adaptive.q_position", value=math.inf)), "adaptive.q_position", "range"
+    )
+    assert_refused(
+        rig.set(Parameter("adaptive.q_velocity", value="x")), "adaptive.q_velocity", "number"
+    )
+    assert_refused(rig.set(Parameter("gains.kp", value=50.0)), "gains.kp", "not used")
+    assert_refused(rig.set(Parameter("adaptive.alpha", value=10.0)), "adaptive.alpha", "read-only")
+    check(7, Q2, R2)
+    assert counter(rig.fb, "parameter_updates") == 1
+    assert errors(rig.fb) == 0
+
+
+# ----------------------------------------------------------------------------------------------
+# 3. Bad configuration: one line on stderr naming the parameter, exit code 2
+# ----------------------------------------------------------------------------------------------
+FF, FB, PLANT = "apc_feedforward.node", "apc_feedback.node", "apc_plant_sim.node"
+BROKEN_URDF = '<robot name="x"><link name="a"/><joint name="j" type="revolute"><parent link="a"/>'
+NO_JOINT_URDF = '<robot name="x"><link name="a"/></robot>'
+BAD_CONFIGS = [
+    # (id, module, arguments after --ros-args, parameter named, words of the reason)
+    ("period_zero_ff", FF, ["-p", "period:=0.0"], "period", "out of range"),
+    ("period_negative_fb", FB, ["-p", "period:=-0.01"], "period", "out of range"),
+    ("period_zero_plant", PLANT, ["-p", "period:=0.0"], "period", "out of range"),
+    ("step_not_dividing", PLANT, ["-p", "step:=0.003"], "step", "divide"),
+    ("r_zero", FB, ["-p", "adaptive.r:=0.0"], "adaptive.r", "out of range"),
+    ("r_negative", FB, ["-p", "adaptive.r:=-1.0"], "adaptive.r", "out of range"),
+    ("r_wrong_type", FB, ["-p", "adaptive.r:=small"], "adaptive.r", "must be a number"),
+    ("q_negative", FB, ["-p", "adaptive.q_position:=-0.1"], "adaptive.q_position", "range"),
+    ("rho_zero", FB, ["-p", "adaptive.rho:=0.0"], "adaptive.rho", "out of range"),
+    ("rho_above_one", FB, ["-p", "adaptive.rho:=1.5"], "adaptive.rho", "out of range"),
+    ("controller", FB, ["-p", "controller:=lqr"], "controller", "must be one of"),
+    ("forgetting", FB, ["-p", "adaptive.forgetting:=bogus"], "adaptive.forgetting", "bogus"),
+    ("mode", PLANT, ["-p", "mode:=fast"], "mode", "must be one of"),
+    (
+        "urdf_missing",
+        FB,
+        ["-p", "robot_description_path:=/nonexistent/arm.urdf"],
+        "robot_description_path",
+        "arm.urdf",
+    ),
+    (
+        "urdf_broken_file",
+        PLANT,
+        ["-p", "robot_description_path:={broken}"],
+        "robot_description_path",
+        "XML",
+    ),
+    ("urdf_broken_string", FF, ["-p", "robot_description:=<robot"], "robot_description", "XML"),
+    (
+        "urdf_no_joint",
+        FF,
+        ["-p", "robot_description_path:={no_joint}"],
+        "robot_description_path",
+        "joint",
+    ),
+    ("lock_joints", FF, ["-p", "lock_joints:=[nope]"], "lock_joints", "nope"),
+    ("inertia_error_ff", FF, ["-p", "inertia_error:=[0.1]"], "inertia_error", "needs 3 values"),
+    ("inertia_error_fb", FB, ["-p", "inertia_error:=[0.1, 0.1]"], "inertia_error", "needs 3"),
+    ("goal_length", FF, ["-p", "move.goal_deg:=[1.0]"], "move.goal_deg", "needs 3 values"),
+    ("q_initial_length", PLANT, ["-p", "q_initial_deg:=[1.0]"], "q_initial_deg", "needs 3"),
+    ("payload_frame", PLANT, ["-p", "payload.frame:=nope"], "payload.frame", "nope"),
+    (
+        "payload_frame_loaded",
+        PLANT,
+        ["-p", "payload.mass_kg:=2.0", "-p", "payload.frame:=nope"],
+        "payload.frame",
+        "nope",
+    ),
+    ("payload_com", PLANT, ["-p", "payload.com_m:=[0.0]"], "payload.com_m", "3"),
+    ("payload_mass", PLANT, ["-p", "payload.mass_kg:=-1.0"], "payload.mass_kg", "out of range"),
+]
+
+
+@pytest.fixture(scope="module")
+def bad_config_runs(tmp_path_factory):
+    """Start every bad configuration at once (a few at a time); collect exit code and stderr."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    base = tmp_path_factory.mktemp("urdf")
+    files = {"broken": base / "broken.urdf", "no_joint": base / "no_joint.urdf"}
+    files["broken"].write_text(BROKEN_URDF)
+    files["no_joint"].write_text(NO_JOINT_URDF)
+
+    def run(case: tuple) -> tuple[int, str]:
+        _, module, args, _, _ = case
+        args = [a.format(**{k: str(v) for k, v in files.items()}) for a in args]
+        proc = subprocess.run(
+            [sys.executable, "-m", module, "--ros-args", *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=os.environ.copy(),
+        )
+        return proc.returncode, proc.stderr
+
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        return dict(zip((c[0] for c in BAD_CONFIGS), pool.map(run, BAD_CONFIGS), strict=True))
+
+
+@pytest.mark.parametrize("case", BAD_CONFIGS, ids=[c[0] for c in BAD_CONFIGS])
+def test_bad_configuration_stops_the_node_with_one_line(bad_config_runs, case):
+    name, module, _, parameter, reason = case
+    code, stderr = bad_config_runs[name]
+    assert code == 2, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, stderr
+    prog = module.split(".")[0].removeprefix("apc_").replace("plant_sim", "plant")
+    assert lines[0].startswith(f"{prog}_node: parameter '{parameter}': "), lines[0]
+    assert reason in lines[0], lines[0]
