@@ -33,8 +33,10 @@ lint: setup
 run: setup
 	$(PY) -m apc_plant_sim.reproduce --out runs
 
+# bench/results.json + results.md, < 10 min on 2 cores (BENCH_ARGS=--quick: ~4 min); no timing
+# is asserted anywhere in make test.
 bench: setup
-	$(PY) bench/run_all.py
+	$(PY) bench/run_all.py $(BENCH_ARGS)
 
 colcon: setup
 	rm -rf build install log
