@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile
 
 from apc_msgs_py import wire
 from apc_msgs_py.bag import BagWriter
@@ -41,6 +42,23 @@ PARAMS: tuple[Param, ...] = (
     ),
     Param("compression", "zstd", "chunk compression: zstd, lz4 or none"),
 )
+
+
+#: Reader queue of each recording subscription. The publishers keep 10 samples; a Python
+#: recorder that falls behind for longer than that (a loaded machine, a chunk being compressed)
+#: would have the oldest dropped from a 10-deep reader queue without a trace (an observer with
+#: depth 10 lost five joint states that way in test/test_faults_system.py). The channel metadata
+#: still records the publishers' offered QoS.
+RECORDER_QUEUE_DEPTH = 1000
+
+
+def _deep(qos: QoSProfile) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=max(qos.depth, RECORDER_QUEUE_DEPTH),
+        reliability=qos.reliability,
+        durability=qos.durability,
+    )
 
 
 class RecorderNode(Node):
@@ -87,7 +105,7 @@ class RecorderNode(Node):
                     spec.msg_type,
                     spec.name,
                     lambda data, topic=topic: self._on_message(topic, data),
-                    spec.qos,
+                    _deep(spec.qos),
                     raw=True,
                 )
             )

@@ -37,7 +37,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
@@ -97,13 +97,23 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "watchdog_s",
         0.05,
-        "realtime: a torque older than this (wall s) is missing: no feedback -> nominal only; "
-        "no nominal -> brake",
+        "realtime: a torque whose sample is older than this (s, counted in the plant's own "
+        "periods) is missing: no feedback -> nominal only; no nominal -> brake",
         0.0,
         60.0,
     ),
     Param("publish_clock", True, "publish /clock = kT (sim time for use_sim_time nodes)"),
 )
+
+
+def best_effort(qos: QoSProfile) -> QoSProfile:
+    """``qos`` with BEST_EFFORT reliability (matches RELIABLE publishers, never blocks)."""
+    return QoSProfile(
+        history=qos.history,
+        depth=qos.depth,
+        reliability=ReliabilityPolicy.BEST_EFFORT,
+        durability=qos.durability,
+    )
 
 
 class PlantNode(Node):
@@ -193,17 +203,23 @@ class PlantNode(Node):
             else None
         )
         diag = self.diagnostics
+        # Real time applies the newest torque and never waits for one: a reliable subscription
+        # would hold every later torque back until a lost one is repaired (head-of-line
+        # blocking: 50-110 ms with FastDDS's defaults on a link with 1 % loss, longer than the
+        # watchdog, so the arm braked mid-move). Best effort matches the controllers' reliable
+        # publishers and hands over what arrives. Lockstep needs every sample: reliable.
+        torque_qos = qos if self.mode == "lockstep" else best_effort(qos)
         self.ff_sub = self.create_subscription(
             JointState,
             wire.FEEDFORWARD_TORQUE,
             guarded(self, diag, wire.FEEDFORWARD_TORQUE, self._on_feedforward),
-            qos,
+            torque_qos,
         )
         self.fb_sub = self.create_subscription(
             JointState,
             wire.FEEDBACK_TORQUE,
             guarded(self, diag, wire.FEEDBACK_TORQUE, self._on_feedback),
-            qos,
+            torque_qos,
         )
         self._diagnostics_pub = DiagnosticsPublisher(self, self.diagnostics)
         if self.mode == "lockstep":
@@ -418,8 +434,15 @@ class PlantNode(Node):
         stamp = self.k * self.period_ns
         watchdog = self._values["watchdog_s"]
         ff, fb = self._ff_latest, self._fb_latest
-        ff_fresh = ff is not None and now - ff[2] <= watchdog + self.plant.config.period
-        fb_fresh = fb is not None and now - fb[2] <= watchdog + self.plant.config.period
+        # Freshness by the sample a torque answers, not by when it was taken: after a stall of
+        # this process (a loaded machine) the timer fires before the torques waiting in the
+        # queue are taken, and a wall-clock test braked the arm although both controllers had
+        # answered every sample. Counted in periods: a torque answering sample j is fresh up to
+        # sample j + watchdog_s / T, so a dead controller trips the watchdog at the tick
+        # watchdog_s + T to watchdog_s + 2 T after its last torque arrived, as before.
+        limit_ns = wire.seconds_to_ns(watchdog)
+        ff_fresh = ff is not None and stamp - ff[0] <= limit_ns
+        fb_fresh = fb is not None and stamp - fb[0] <= limit_ns
         late = False
         for latest, topic in ((ff, wire.FEEDFORWARD_TORQUE), (fb, wire.FEEDBACK_TORQUE)):
             if latest is None:
