@@ -38,7 +38,13 @@ from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
 from apc_msgs_py.robot import Payload, load_robot, with_inertia_error, with_payload
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
-from apc_plant_sim.scenario import PAPER_CASES, make_feedback, paper_scenario, paper_settings
+from apc_plant_sim.scenario import (
+    PAPER_CASES,
+    make_feedback,
+    paper_scenario,
+    paper_settings,
+    recommended_settings,
+)
 
 #: Poses visited in turn (URDF angles, deg): the paper's start and end, its stretched pose
 #: (gravity loading of joint 2 peaks), and two more.
@@ -62,6 +68,8 @@ CONFIGS: dict[str, dict[str, Any]] = {
     # the same two with a position-weighted Q (bench/trace_guard.py), which holds a payload
     "guarded_qpos": {"q_position": 1e3},
     "paper_qpos": dict(paper_settings(), q_position=1e3),
+    # the measured fix within the paper's structure (README, bench/preset_sweep.py)
+    "recommended": recommended_settings(),
 }
 
 

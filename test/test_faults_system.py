@@ -1101,3 +1101,30 @@ def test_long_run_stays_bounded():
     # Either way the last good estimate keeps the arm where it is while nothing moves.
     for r in (unguarded, guarded):
         assert r["finite"] and max(r["max_error_deg"]["hold"]) < 1.0, r["max_error_deg"]
+
+
+@pytest.mark.slow
+def test_one_hour_with_the_recommended_preset_stays_bounded():
+    """One hour of simulated time (360,000 samples) of moves, holds up to 20 s and payload
+    changes (0-5 lb, picked up at the start of moves), offline, with the recommended preset:
+    every sample finite, trace(P) never above trace(P(0)), no refused RLS update, tracking error
+    bounded. Measured (bench/long_run.py --config recommended --hours 1): 618 moves, 205 payload
+    steps of up to 5 lb, worst 5.7 deg in the transient after a payload step, ~1 deg otherwise,
+    111 s wall.
+    """
+    lr = _long_run_module()
+    r = lr.run_long(lr.CONFIGS["recommended"], 3600.0, segment_s=600.0)
+    report(
+        "one hour, recommended",
+        wall_s=r["wall_s"],
+        moves=r["moves"],
+        payload_changes=r["payload_changes"],
+        max_trace_p=r["max_trace_p"],
+        rejected=r["rejected_updates"],
+        max_error_deg=r["max_error_deg"],
+    )
+    assert r["samples"] == 360_001
+    assert r["finite"] and r["diverged_at_s"] is None
+    assert r["max_trace_p"] <= r["trace_p0"] * (1 + 1e-9)
+    assert r["rejected_updates"] == 0
+    assert max(max(r["max_error_deg"]["move"]), max(r["max_error_deg"]["hold"])) < 10.0

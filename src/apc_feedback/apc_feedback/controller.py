@@ -134,9 +134,11 @@ class AdaptiveConfig:
     integral_limit : float
         Anti-windup bound on each ``|ξ_i|`` (rad s).
     project_g : bool
-        Refuse an RLS update that makes a diagonal entry of ``Ĝ``'s velocity block
-        (``≈ T (D(q)⁻¹)_ii``, positive for any arm) non-positive, and explain that sample's
-        residual as a change of ``ŵ`` instead: a projection onto physically possible models.
+        Refuse (take back) an RLS update that makes a diagonal entry of ``Ĝ``'s velocity block
+        (``≈ T (D(q)⁻¹)_ii``, positive for any arm) non-positive: a projection onto physically
+        possible models. Without it a sudden load (a payload picked up) lets one
+        large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
+        torque (19 deg on joint 3 in the pickup run). Off in the paper.
         A sudden disturbance (a payload picked up) otherwise lets one large-residual step flip
         the sign of ``Ĝ`` and the law commands full torque the wrong way. Off in the paper.
     """
@@ -292,9 +294,8 @@ class AdaptiveFeedback(FeedbackLaw):
             try:
                 residual = self.rls.update(z, dx).residual
                 if self.config.project_g and not self._g_physical():
-                    # Unphysical Ĝ: take the step back and put the surprise in the bias ŵ.
+                    # Unphysical Ĝ: take the step back, keep the last physical estimate.
                     self.rls.undo()
-                    self.rls.shift_bias(residual)
                     self.projected_updates += 1
             except RlsError:
                 # Keep controlling with the last good estimate; the node counts and reports it.
@@ -309,10 +310,11 @@ class AdaptiveFeedback(FeedbackLaw):
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
 
-        ``(D⁻¹)_ii > 0`` for any arm. Stronger tests were measured and are worse: positive
-        definiteness of the block fails from the start on the six-joint PUMA (Eq. 33's
-        ``A B T²/2`` makes ``Ĝ(0)`` non-symmetric, wrist inertias are ~1e-4 of the arm's), and
-        positive definiteness relative to ``Ĝ(0)`` refuses so many steps that the loop saturates.
+        ``(D⁻¹)_ii > 0`` for any arm. Measured alternatives were worse (``bench/preset_sweep.py``
+        and an hour-long run): positive definiteness of the whole block fails from the start on
+        the six-joint PUMA (Eq. 33's ``A B T²/2`` makes ``Ĝ(0)`` non-symmetric, wrist inertias
+        are ~1e-4 of the arm's); bounds relative to ``Ĝ(0)`` destabilise the Panda; and
+        explaining a refused step's residual as a jump of ``ŵ`` destabilised an hour-long run.
         """
         n = self.n_joints
         return bool(np.all(np.diagonal(self.rls.G[n:]) > 0.0))

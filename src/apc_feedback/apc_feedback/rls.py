@@ -341,16 +341,6 @@ class Rls:
         self._k = 0
         self._can_undo = False
 
-    def shift_bias(self, delta: np.ndarray) -> None:
-        """Add ``delta`` (p,) to ŵ, leaving F̂, Ĝ and P as they are.
-
-        Used after :meth:`undo` when an update was refused as unphysical: the residual is then
-        explained as a change of the bias (a disturbance), which is what it usually is.
-        """
-        delta = _vector("delta", delta, self._p)
-        self._theta[self._p + self._n] += delta
-        self._can_undo = False
-
     def undo(self) -> None:
         """Take back the last :meth:`update` (Θ, P and the count), e.g. when a projection
         onto physically possible parameters refuses its result.

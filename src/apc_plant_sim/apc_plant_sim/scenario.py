@@ -253,9 +253,9 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
     with Q = 0.1 I weighs next-step position ~ (T/2)^2 as much as velocity, so a payload's
     gravity builds up as position error), a 3-step receding horizon over the identified model,
-    integral action on the position error, the RLS wind-up guard, and a projection that keeps
-    Ĝ's velocity block (≈ T D⁻¹) positive definite, putting an unexplained jump into ŵ (a
-    payload picked up mid-motion otherwise flips Ĝ and the law saturates).
+    integral action on the position error, the RLS wind-up guard, and a projection that refuses
+    RLS steps making a diagonal entry of Ĝ's velocity block (≈ T D⁻¹) non-positive (a payload
+    picked up mid-motion otherwise flips Ĝ and the law saturates).
     """
     return {
         "q_position": 2000.0,
