@@ -13,7 +13,6 @@ import platform
 import random
 import re
 import shlex
-import signal
 import subprocess
 import sys
 import time
@@ -287,27 +286,24 @@ def isolate_dds() -> str:
 
 def stop_processes(procs: Sequence[subprocess.Popen], timeout_s: float = 5.0) -> None:
     """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends."""
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-        alive = [p for p in procs if p.poll() is None]
-        if not alive:
-            return
-        for p in alive:
-            try:
-                p.send_signal(sig)
-            except ProcessLookupError:
-                pass
-        deadline = time.monotonic() + timeout_s
-        for p in alive:
-            try:
-                p.wait(max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                pass
+    from apc_plant_sim.experiment import stop_processes as stop
+
+    stop(procs, timeout_s=timeout_s)
 
 
 # ------------------------------------------------------------------------------------ output
 def progress(message: str) -> None:
     """One progress line on stderr (stdout may carry JSON)."""
     print(f"[bench {time.strftime('%H:%M:%S')}] {message}", file=sys.stderr, flush=True)
+
+
+def emit(result: dict[str, Any], part: str, t0: float, write: bool = True) -> None:
+    """Finish one part: record its wall time, print it as JSON, merge it into results.json."""
+    result[f"{part}_wall_s"] = round(time.monotonic() - t0, 1)
+    json.dump(result, sys.stdout, indent=1)
+    print()
+    if write:
+        write_results(result)
 
 
 def read_results(path: Path = RESULTS_JSON) -> dict[str, Any]:

@@ -336,12 +336,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--joints", type=int, nargs="+", default=list(JOINTS))
     args = parser.parse_args(argv)
     t0 = time.monotonic()
-    result = run(args.quick, tuple(args.joints))
-    result["compute_wall_s"] = round(time.monotonic() - t0, 1)
-    json.dump(result, sys.stdout, indent=1)
-    print()
-    if not args.no_write:
-        benchlib.write_results(result)
+    benchlib.emit(run(args.quick, tuple(args.joints)), "compute", t0, write=not args.no_write)
     return 0
 
 

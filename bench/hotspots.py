@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import json
 import pstats
 import sys
 import tempfile
@@ -124,12 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
-    result = run(args.quick)
-    result["hotspots_wall_s"] = round(time.monotonic() - t0, 1)
-    json.dump(result, sys.stdout, indent=1)
-    print()
-    if not args.no_write:
-        benchlib.write_results(result)
+    benchlib.emit(run(args.quick), "hotspots", t0, write=not args.no_write)
     return 0
 
 

@@ -23,7 +23,6 @@ plants publishing one global clock would make no sense.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -129,12 +128,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--arms", type=int, nargs="+", default=list(ARMS))
     args = parser.parse_args(argv)
     t0 = time.monotonic()
-    result = run(args.quick, tuple(args.arms))
-    result["multi_arm_wall_s"] = round(time.monotonic() - t0, 1)
-    json.dump(result, sys.stdout, indent=1)
-    print()
-    if not args.no_write:
-        benchlib.write_results(result)
+    benchlib.emit(run(args.quick, tuple(args.arms)), "multi_arm", t0, write=not args.no_write)
     return 0
 
 

@@ -173,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
+    from apc_msgs_py.nodeutil import destroy_nodes
     from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
@@ -246,12 +247,7 @@ def main(argv: list[str] | None = None) -> int:
             write_profile(profiler, Path(args.profile), max(counts))
         if probe is not None and args.out:
             Path(args.out).write_text(json.dumps(probe.dump()))
-        for node in reversed(nodes):
-            closer = getattr(node, "close", None)
-            if callable(closer):
-                closer()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        destroy_nodes(nodes)
     return 0 if plant is None else plant.exit_code
 
 

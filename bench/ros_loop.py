@@ -490,12 +490,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--skip-variants", action="store_true", help="no EventsExecutor runs")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
-    result = run(args.quick, not args.skip_variants)
-    result["ros_loop_wall_s"] = round(time.monotonic() - t0, 1)
-    json.dump(result, sys.stdout, indent=1)
-    print()
-    if not args.no_write:
-        benchlib.write_results(result)
+    benchlib.emit(run(args.quick, not args.skip_variants), "ros_loop", t0, write=not args.no_write)
     return 0
 
 

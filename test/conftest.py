@@ -6,6 +6,7 @@ import os
 import random
 
 import pytest
+from rosgraph import Graph
 
 # Set before any rclpy context is created (contexts read the environment at init), so tests that
 # run nodes never see another run's traffic and never leave this machine.
@@ -17,3 +18,13 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 def ros_domain() -> str:
     """The DDS domain of this test process (children inherit it)."""
     return os.environ["ROS_DOMAIN_ID"]
+
+
+@pytest.fixture
+def graph():
+    """A :class:`rosgraph.Graph` for the test's nodes; torn down after the test."""
+    g = Graph()
+    try:
+        yield g
+    finally:
+        g.close()

@@ -27,9 +27,9 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph import Graph
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -63,49 +63,6 @@ DEEP_QOS = QoSProfile(
 
 def _overrides(values: dict[str, Any]) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
-
-
-class Graph:
-    """Nodes of one test on their own context and executor; everything is torn down after."""
-
-    def __init__(self) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes: list[Any] = []
-
-    def add(self, node: Any) -> Any:
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
-
-    def spin_until(self, condition: Any, timeout_s: float = 20.0, what: str = "condition") -> None:
-        deadline = time.monotonic() + timeout_s
-        while not condition():
-            assert time.monotonic() < deadline, f"{what} not met within {timeout_s} s"
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def spin_for(self, seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.005)
-
-    def close(self) -> None:
-        for node in reversed(self.nodes):
-            closer = getattr(node, "close", None)
-            if callable(closer):
-                closer()
-            node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
-@pytest.fixture
-def graph():
-    g = Graph()
-    try:
-        yield g
-    finally:
-        g.close()
 
 
 def counter(node: Any, key: str) -> int:

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -29,41 +28,6 @@ pytestmark = pytest.mark.ros
 
 def _overrides(values):
     return [Parameter(k, value=v) for k, v in values.items()]
-
-
-class Graph:
-    """Nodes of one test on their own context and executor; everything is torn down after."""
-
-    def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes = []
-
-    def add(self, node):
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
-
-    def spin_until(self, condition, timeout_s=20.0):
-        deadline = time.monotonic() + timeout_s
-        while not condition():
-            assert time.monotonic() < deadline, "condition not met in time"
-            self.executor.spin_once(timeout_sec=0.02)
-
-    def close(self):
-        for node in reversed(self.nodes):
-            node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
-@pytest.fixture
-def graph():
-    g = Graph()
-    try:
-        yield g
-    finally:
-        g.close()
 
 
 def test_goal_is_executed_after_the_current_motion(graph):

@@ -20,6 +20,7 @@ from sensor_msgs.msg import JointState
 from apc_feedback.node import FeedbackNode
 from apc_msgs_py import wire
 from apc_msgs_py.bag import read_messages
+from apc_msgs_py.nodeutil import destroy_nodes
 from apc_msgs_py.player import PlayerNode, main
 from apc_plant_sim.experiment import RunSpec, run_in_process
 from apc_plant_sim.scenario import paper_scenario, paper_settings
@@ -64,12 +65,7 @@ def ros() -> Iterator[tuple[rclpy.Context, list[Node]]]:
     try:
         yield ctx, nodes
     finally:
-        for node in reversed(nodes):
-            closer = getattr(node, "close", None)
-            if callable(closer):
-                closer()
-            node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        destroy_nodes(nodes, ctx)
 
 
 class Collector(Node):

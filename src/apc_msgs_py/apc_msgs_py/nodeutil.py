@@ -242,6 +242,17 @@ def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable)
     return wrapper
 
 
+def destroy_nodes(nodes: Iterable[Node], context: rclpy.Context | None = None) -> None:
+    """Tear down in reverse order of creation: ``close()`` what can be closed (a recorder's
+    file), destroy every node, then shut the context down (the default one if ``None``)."""
+    for node in reversed(list(nodes)):
+        closer = getattr(node, "close", None)
+        if callable(closer):
+            closer()
+        node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
 def print_help(prog: str, summary: str, params: Iterable[Param]) -> None:
     print(f"usage: {prog} [--ros-args -p NAME:=VALUE ... --params-file FILE]\n")
     print(summary.strip() + "\n")
@@ -320,12 +331,7 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        if node is not None:
-            closer = getattr(node, "close", None)
-            if callable(closer):
-                closer()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        destroy_nodes([node] if node is not None else [])
         if previous_sigint is not None:
             signal.signal(signal.SIGINT, previous_sigint)
     return code

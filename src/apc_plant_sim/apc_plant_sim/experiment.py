@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ import yaml
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
+from apc_msgs_py.nodeutil import StopSignals, destroy_nodes
 from apc_msgs_py.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
@@ -184,7 +186,6 @@ def run_in_process(
     """
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
-    from apc_msgs_py.nodeutil import StopSignals
     from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
@@ -256,12 +257,7 @@ def run_in_process(
         except TimeoutError as exc:
             return RunOutcome(path, False, str(exc), 0, _since(t0))
         finally:
-            for node in reversed(nodes):
-                closer = getattr(node, "close", None)
-                if callable(closer):
-                    closer()
-                node.destroy_node()
-            rclpy.try_shutdown(context=context)
+            destroy_nodes(nodes, context)
 
 
 def run_in_processes(
@@ -273,7 +269,6 @@ def run_in_processes(
     and are waited for (:func:`stop_processes`), the recording is finished, and the outcome
     says ``interrupted``. No child outlives the runner.
     """
-    from apc_msgs_py.nodeutil import StopSignals
     from apc_msgs_py.recorder import RecorderNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -370,27 +365,23 @@ def run_in_processes(
             return RunOutcome(path, False, str(exc), samples(), _since(t0))
         finally:
             stop_processes(procs.values())
-            if recorder is not None:
-                recorder.close()
-                recorder.destroy_node()
-            rclpy.try_shutdown(context=context)
+            destroy_nodes([recorder] if recorder is not None else [], context)
             Path(params_file).unlink(missing_ok=True)
 
 
-def stop_processes(procs: Sequence[subprocess.Popen] | Any, timeout_s: float = 3.0) -> None:
-    """SIGINT, then SIGTERM, then SIGKILL: every child ends (ROS_WHEELS.md warns of stuck ones)."""
+def stop_processes(procs: Iterable[subprocess.Popen], timeout_s: float = 3.0) -> None:
+    """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends (ROS_WHEELS.md
+    warns of processes that ignore SIGTERM)."""
     procs = list(procs)
-    for sig in ("send_signal", "terminate", "kill"):
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
         alive = [p for p in procs if p.poll() is None]
         if not alive:
             return
         for p in alive:
-            if sig == "send_signal":
-                import signal
-
-                p.send_signal(signal.SIGINT)
-            else:
-                getattr(p, sig)()
+            try:
+                p.send_signal(sig)
+            except ProcessLookupError:
+                pass
         deadline = time.monotonic() + timeout_s
         for p in alive:
             try:
