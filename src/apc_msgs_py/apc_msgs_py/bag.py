@@ -1138,6 +1138,17 @@ def _describe(source: Any) -> str:
     return str(getattr(source, "name", type(source).__name__))
 
 
+def _bag_message(schema: Schema | None, channel: Channel, message: Message) -> BagMessage:
+    return BagMessage(
+        topic=channel.topic,
+        type_name=schema.name if schema is not None else "",
+        log_time_ns=message.log_time,
+        publish_time_ns=message.publish_time,
+        data=message.data,
+        sequence=message.sequence,
+    )
+
+
 def read_messages(
     source: str | bytes | os.PathLike | IO[bytes],
     topics: Iterable[str] | str | None = None,
@@ -1187,14 +1198,7 @@ def read_messages(
                     ending_before=end_ns,
                 )
                 for schema, channel, message in iterator:
-                    yield BagMessage(
-                        topic=channel.topic,
-                        type_name=schema.name if schema is not None else "",
-                        log_time_ns=message.log_time,
-                        publish_time_ns=message.publish_time,
-                        data=message.data,
-                        sequence=message.sequence,
-                    )
+                    yield _bag_message(schema, channel, message)
                 return
             except McapError as err:
                 raise BagError(f"{_describe(source)}: {err}") from None
@@ -1210,15 +1214,7 @@ def read_messages(
                 continue
             if end_ns is not None and message.log_time >= end_ns:
                 continue
-            schema = state.schemas.get(channel.schema_id)
-            item = BagMessage(
-                topic=channel.topic,
-                type_name=schema.name if schema is not None else "",
-                log_time_ns=message.log_time,
-                publish_time_ns=message.publish_time,
-                data=message.data,
-                sequence=message.sequence,
-            )
+            item = _bag_message(state.schemas.get(channel.schema_id), channel, message)
             if log_time_order:
                 selected.append(item)
             else:
