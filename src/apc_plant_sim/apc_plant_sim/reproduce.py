@@ -258,8 +258,10 @@ def acceptance_table(acceptance_by_preset: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def figures(planned: Sequence[Planned], outcomes: dict[str, Any], out: Path) -> list[Path]:
-    """The paper's Figures 3-9 and more, from the recordings."""
+def figures(
+    planned: Sequence[Planned], outcomes: dict[str, Any], metrics: dict[str, dict], out: Path
+) -> list[Path]:
+    """The paper's Figures 3-9 and more, from the recordings (and their metrics)."""
     from apc_plant_sim import plots
     from apc_plant_sim.recording import load_run
 
@@ -309,8 +311,8 @@ def figures(planned: Sequence[Planned], outcomes: dict[str, Any], out: Path) -> 
                 ))  # fmt: skip
     sweep: dict[str, list] = {}
     for p in planned:
-        if p.group == "sweep" and outcomes.get(p.spec.name, {}).get("ok"):
-            m = analyze_file(outcomes[p.spec.name]["path"])
+        if p.group == "sweep" and p.spec.name in metrics:
+            m = metrics[p.spec.name]
             sweep.setdefault(p.label, []).append((p.spec.scenario.payload_kg, m["max_error_deg"]))
     if sweep:
         made.append(plots.payload_sweep(
@@ -378,7 +380,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     made: list[Path] = []
     if not args.no_figures:
-        made = figures(planned, outcomes, out)
+        made = figures(planned, outcomes, metrics, out)
         from apc_plant_sim import plots
         from apc_plant_sim.recording import load_run
 
