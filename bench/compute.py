@@ -5,19 +5,17 @@ the others; see ``benchlib.arm``) it times, over many repetitions of a batch of 
 varied inputs, per call in microseconds:
 
 - ``rls_update_us``     ``Rls.update(z, dx)`` (Eqs. 26, 29-31 with the trace guard)
-- ``gain_us``           what ``AdaptiveFeedback`` does for Eq. 35: the F̂, Ĝ, ŵ accessors and
-                        ``one_step_control(..., check_weights=False)``
+- ``gain_us``           what ``AdaptiveFeedback`` does for Eq. 35: ``OneStepControl`` on the
+                        identifier's Θᵀ view (preallocated, Cholesky solve)
 - ``feedback_step_us``  ``AdaptiveFeedback.update`` (RLS + gain + bookkeeping), the whole
                         per-sample feedback
 - ``rnea_us``           ``nominal_torque`` (Pinocchio RNEA + the finiteness check + copy),
                         the feedforward's per-sample cost; ``pin_rnea_us`` is the bare call
-- ``plant_period_us``   ``Plant.step``: one period T = 10 ms, 4 RK4 steps of CRBA + nonlinear
-                        effects + solve; ``plant_acceleration_us`` is one of its 16 evaluations
+- ``plant_period_us``   ``Plant.step``: one period T = 10 ms, 4 RK4 steps of ABA (the default);
+                        ``plant_period_crba_us`` the same with ``forward_dynamics="crba"``
+                        (CRBA + nonlinear effects + solve, checked equal to rounding);
+                        ``plant_acceleration_crba_us`` is one of the latter's 16 evaluations
                         and ``aba_us`` Pinocchio's ABA for the same acceleration
-- ``lean_feedback_step_us``  ``bench/fastpath.py``: the same law with preallocated buffers and
-                        one finiteness check (checked equal to ``AdaptiveFeedback``), to size
-                        what optimising ``src/`` can gain; ``lean_plant_period_us`` the
-                        plant period with ABA (checked equal to ``Plant.step``)
 
 and fits the growth exponent in n (``time ~ c n^k`` over n = 3..24) next to Table 1's operation
 counts (``config/reference/paper.json``, ``compute_cost_table1``).
@@ -133,10 +131,9 @@ class Inputs:
 def setup_arm(n: int) -> tuple[dict[str, Any], dict[str, Callable[[int], Any]]]:
     """The arm's description and checks, and the operations to time: ``fn(i)`` on input i."""
     import pinocchio as pin
-    from fastpath import LeanAdaptive, LeanPlant
 
     from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
-    from apc_feedback.optimal import one_step_control
+    from apc_feedback.optimal import OneStepControl
     from apc_feedback.rls import Rls
     from apc_feedforward.nominal import nominal_torque
     from apc_plant_sim.plant import Plant, PlantConfig
@@ -168,11 +165,11 @@ def setup_arm(n: int) -> tuple[dict[str, Any], dict[str, Callable[[int], Any]]]:
 
     ops["rls_update_us"] = rls_update
 
-    # Gain (Eq. 35) as the law computes it: accessor copies + one_step_control.
+    # Gain (Eq. 35) as the law computes it: on the identifier's Θᵀ view, no copies.
+    one_step = OneStepControl(np.diag(law.Q), law.R, config.control_form)
+
     def gain(i: int) -> None:
-        one_step_control(
-            rls.F, rls.G, rls.w, law.Q, law.R, dxs[i], config.control_form, check_weights=False
-        )
+        one_step(rls.model_view(), dxs[i])
 
     ops["gain_us"] = gain
 
@@ -190,51 +187,34 @@ def setup_arm(n: int) -> tuple[dict[str, Any], dict[str, Callable[[int], Any]]]:
 
     # Plant: one period (4 RK4 steps), reset to the sample's state so it never runs away.
     plant = Plant(robot, PlantConfig(period=0.010, step=0.0025), x.q_d[0])
+    crba_plant = Plant(robot, PlantConfig(forward_dynamics="crba"), x.q_d[0])
     gravity = [pin.rnea(model, data, x.q_d[i], 0 * x.q_d[i], 0 * x.q_d[i]) for i in range(k)]
 
-    def plant_period(i: int) -> None:
-        plant.q, plant.qd = x.q_d[i], x.qd_d[i]
-        plant.step(gravity[i])
+    def period_of(p: Plant) -> Callable[[int], None]:
+        def period(i: int) -> None:
+            p.q, p.qd = x.q_d[i], x.qd_d[i]
+            p.step(gravity[i])
 
-    ops["plant_period_us"] = plant_period
+        return period
+
+    ops["plant_period_us"] = period_of(plant)
+    ops["plant_period_crba_us"] = period_of(crba_plant)
+    steps = []
+    for p in (plant, crba_plant):
+        p.q, p.qd = x.q_d[1], x.qd_d[1]
+        steps.append(p.step(gravity[1]))
+    out["aba_matches_crba_abs_err"] = float(
+        f"{max(np.abs(steps[0].q - steps[1].q).max(), np.abs(steps[0].qd - steps[1].qd).max()):.2g}"
+    )
 
     def acceleration(i: int) -> None:
-        plant.acceleration(x.q_d[i], x.qd_d[i], gravity[i])
+        crba_plant.acceleration(x.q_d[i], x.qd_d[i], gravity[i])
 
     def aba(i: int) -> None:
         pin.aba(model, data, x.q_d[i], x.qd_d[i], gravity[i])
 
-    ops["plant_acceleration_us"] = acceleration
+    ops["plant_acceleration_crba_us"] = acceleration
     ops["aba_us"] = aba
-
-    lean_plant = LeanPlant(robot)
-    plant.q, plant.qd = x.q_d[1], x.qd_d[1]
-    ref_step = plant.step(gravity[1])
-    q_lean, qd_lean, _ = lean_plant.step(x.q_d[1], x.qd_d[1], gravity[1])
-    out["lean_plant_matches_plant_abs_err"] = float(
-        f"{max(np.abs(ref_step.q - q_lean).max(), np.abs(ref_step.qd - qd_lean).max()):.2g}"
-    )
-
-    def lean_plant_period(i: int) -> None:
-        lean_plant.step(x.q_d[i], x.qd_d[i], gravity[i])
-
-    ops["lean_plant_period_us"] = lean_plant_period
-
-    # The lean re-implementation: check it agrees with the law, then time it.
-    ref = AdaptiveFeedback(model, config)
-    lean = LeanAdaptive(model, config)
-    worst = 0.0
-    for i in range(k):
-        applied = x.applied[i] if i else None
-        a = ref.update(i, x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.qdd_d[i], x.u_n[i], applied).du
-        b = lean.update(x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.u_n[i], applied)
-        worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, float(np.max(np.abs(a))))))
-    out["lean_matches_law_rel_err"] = float(f"{worst:.2g}")
-
-    def lean_step(i: int) -> None:
-        lean.update(x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.u_n[i], x.applied[i])
-
-    ops["lean_feedback_step_us"] = lean_step
 
     return out, ops
 
@@ -248,9 +228,8 @@ def fit(per_n: dict[int, dict[str, Any]], ns: Sequence[int]) -> dict[str, Any]:
         "rls_update_us": ("rls",),
         "gain_us": ("control",),
         "feedback_step_us": ("rls", "control"),
-        "lean_feedback_step_us": ("rls", "control"),
         "plant_period_us": (),
-        "lean_plant_period_us": (),
+        "plant_period_crba_us": (),
     }
     out: dict[str, Any] = {}
     for key, table_rows in rows.items():
@@ -315,8 +294,9 @@ def run(quick: bool = False, joints: Sequence[int] = JOINTS) -> dict[str, Any]:
         key: {str(n): per_n[n][key] for n in joints} for key in keys
     }  # feedback_step_us: {"3": {...}, ...}
     result["compute_arms"] = {str(n): per_n[n]["arm"] for n in joints}
-    for key in ("lean_matches_law_rel_err", "lean_plant_matches_plant_abs_err"):
-        result[key] = {str(n): per_n[n][key] for n in joints}
+    result["aba_matches_crba_abs_err"] = {
+        str(n): per_n[n]["aba_matches_crba_abs_err"] for n in joints
+    }
     if len(joints) >= 2:
         result["growth_exponent"] = fit(per_n, joints)
     if 3 in per_n:

@@ -161,12 +161,11 @@ def markdown(d: dict[str, Any]) -> str:
             ("rls_update_us", "RLS update"),
             ("gain_us", "gain (Eq. 35)"),
             ("feedback_step_us", "feedback total"),
-            ("lean_feedback_step_us", "feedback, lean (bench/fastpath.py)"),
             ("rnea_us", "nominal torque (RNEA)"),
             ("pin_rnea_us", "pin.rnea alone"),
-            ("plant_period_us", "plant period (4 RK4 steps)"),
-            ("lean_plant_period_us", "plant period, ABA (bench/fastpath.py)"),
-            ("plant_acceleration_us", "plant acceleration (CRBA+NLE+solve)"),
+            ("plant_period_us", "plant period (4 RK4 steps of ABA)"),
+            ("plant_period_crba_us", "plant period, CRBA + NLE + solve"),
+            ("plant_acceleration_crba_us", "plant acceleration (CRBA+NLE+solve)"),
             ("aba_us", "pin.aba alone"),
         ]
         rows = []

@@ -183,3 +183,28 @@ def test_make_feedback_rejects_unknown():
         make_feedback("lqr", robot, 0.01)
     with pytest.raises(FeedbackError, match="unknown gain parameter 'kd'"):
         make_feedback("pd", robot, 0.01, {"kd": 1.0})
+
+
+def test_reconfigure_takes_new_weights_and_keeps_the_identified_model(controller_robot):
+    """New Q/R at run time change du from the same estimate; the identifier is not reset."""
+    model = controller_robot.model
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    laws = [AdaptiveFeedback(model, AdaptiveConfig()) for _ in range(2)]
+    for law in laws:
+        law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+        law.update(1, q + 1e-3, qd, q_d, qd_d, qdd_d, u_n, u_n + 1.0)
+    heavier = AdaptiveConfig(q_position=1e4, q_velocity=1.0, r=1e-4)
+    laws[1].reconfigure(heavier)
+    assert laws[1].config == heavier and laws[1].rls.n_updates == 1
+    outs = [law.update(2, q - 1e-3, qd, q_d, qd_d, qdd_d, u_n, u_n - 1.0) for law in laws]
+    np.testing.assert_array_equal(laws[0].rls.theta, laws[1].rls.theta)  # same identification
+    dx = np.concatenate([q - 1e-3 - q_d, qd - qd_d])
+    Q = np.diag([1e4] * 3 + [1.0] * 3)
+    expected = one_step_control(
+        laws[1].rls.F, laws[1].rls.G, laws[1].rls.w, Q, 1e-4 * np.eye(3), dx
+    )
+    np.testing.assert_allclose(outs[1].du, expected, rtol=1e-10)
+    assert not np.allclose(outs[0].du, outs[1].du)
+    with pytest.raises(FeedbackError, match="identifier"):
+        laws[1].reconfigure(AdaptiveConfig(rho=0.9))

@@ -1,7 +1,8 @@
 """Rigid-body dynamics identities and the plant's integrator (apc_plant_sim.plant).
 
 - RNEA (the feedforward's Eqs. 2-8) equals the Lagrange-Euler form D qdd + h + c (Eq. 1).
-- The plant's Lagrange-Euler forward dynamics equals Pinocchio's ABA.
+- The plant's two forward dynamics, ABA and Lagrange-Euler term by term (CRBA, nonlinear
+  effects, solve), agree: per acceleration and over a whole period.
 - RK4 conserves energy, has order 4, matches a pendulum solved by scipy, and holds the torque
   over the whole period T (zero-order hold).
 - Torque limits, configuration checks and input checks.
@@ -93,17 +94,34 @@ def test_plant_acceleration_equals_aba(puma3: Robot, puma6: Robot, n_dof: int) -
     """solve(D, tau - h - c) on the plant's (payload) model equals Pinocchio's ABA."""
     base = puma3 if n_dof == 3 else puma6
     robot = with_payload(base, Payload(PAPER_MAX_PAYLOAD_KG, (0.0, 0.0, 0.05), "wrist_center"))
-    plant = Plant(robot, PlantConfig(), np.zeros(n_dof))
+    by_aba = Plant(robot, PlantConfig(), np.zeros(n_dof))
+    by_crba = Plant(robot, PlantConfig(forward_dynamics="crba"), np.zeros(n_dof))
     data = robot.model.createData()
     rng = np.random.default_rng(7)
     for _ in range(10):
         q = rng.uniform(-math.pi, math.pi, n_dof)
         qd = rng.uniform(-3.0, 3.0, n_dof)
         tau = rng.uniform(-1.0, 1.0, n_dof) * robot.effort_limit
-        qdd = plant.acceleration(q, qd, tau)
+        qdd = by_crba.acceleration(q, qd, tau)
         assert_allclose(qdd, pin.aba(robot.model, data, q, qd, tau), rtol=1e-9, atol=1e-9)
+        assert_allclose(by_aba.acceleration(q, qd, tau), qdd, rtol=1e-9, atol=1e-9)
         # and it inverts the inverse dynamics
         assert_allclose(pin.rnea(robot.model, data, q, qd, qdd), tau, rtol=1e-9, atol=1e-9)
+
+
+def test_aba_and_crba_plants_agree_over_a_second(loaded3: Robot) -> None:
+    """The two algorithms integrate the same arm: 100 periods apart by rounding only."""
+    rng = np.random.default_rng(3)
+    torques = rng.uniform(-0.3, 0.3, (100, 3)) * loaded3.effort_limit
+    plants = [
+        Plant(loaded3, PlantConfig(forward_dynamics=kind), Q0, QD0) for kind in ("aba", "crba")
+    ]
+    for tau in torques:
+        a, b = (plant.step(tau) for plant in plants)
+        assert_array_equal(a.applied, b.applied)
+    assert_allclose(plants[0].q, plants[1].q, rtol=0, atol=1e-10)
+    assert_allclose(plants[0].qd, plants[1].qd, rtol=0, atol=1e-9)
+    assert not np.allclose(plants[0].q, Q0, atol=1e-2)  # it moved
 
 
 # ------------------------------------------------------------------------ energy and order
@@ -288,6 +306,7 @@ def test_torque_limits_can_be_switched_off(loaded3: Robot) -> None:
         ({"step": float("inf")}, "step"),
         ({"step": 0.003}, "step"),  # 0.01 / 0.003 is not whole
         ({"step": 0.02}, "step"),  # longer than the period
+        ({"forward_dynamics": "euler"}, "forward_dynamics"),
     ],
 )
 def test_plant_config_rejects(kwargs: dict, name: str) -> None:

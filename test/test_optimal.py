@@ -8,6 +8,7 @@ from scipy.optimize import minimize
 
 from apc_feedback.optimal import (
     ControlError,
+    OneStepControl,
     closed_loop_eigenvalues,
     one_step_control,
     one_step_cost,
@@ -258,3 +259,43 @@ def test_psd_Q_with_zero_block_is_accepted() -> None:
     Q = np.diag([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     u = one_step_control(**{**pb, "Q": Q})
     assert np.linalg.norm(gradient(**{**pb, "Q": Q}, u=u)) < 1e-10
+
+
+# ----------------------------------------------------------------------------- per-sample form
+@pytest.mark.parametrize("form", ["exact", "printed"])
+@pytest.mark.parametrize("n", [1, 3, 7])
+def test_one_step_control_object_equals_the_function(form: str, n: int) -> None:
+    """OneStepControl on Θᵀ = [F G w] (Cholesky solve) equals one_step_control with diagonal Q."""
+    rng = np.random.default_rng(40 + n)
+    q_diagonal = np.concatenate([np.full(n, 1e3), np.full(n, 0.1)])
+    R = 1e-6 * np.eye(n)
+    control = OneStepControl(q_diagonal, R, form)
+    for _ in range(20):
+        pb = random_problem(rng, n)
+        model_t = np.hstack([pb["F"], pb["G"], pb["w"][:, None]])
+        expected = one_step_control(
+            pb["F"], pb["G"], pb["w"], np.diag(q_diagonal), R, pb["x"], form
+        )
+        got = control(model_t, pb["x"])
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12)
+    # A fresh array each call: holding one never sees the next.
+    first = control(model_t, pb["x"])
+    second = control(model_t, -pb["x"])
+    assert first is not second and not np.array_equal(first, second)
+
+
+def test_one_step_control_object_rejects_bad_weights_and_singular_systems() -> None:
+    with pytest.raises(ControlError, match="Q must be positive semidefinite"):
+        OneStepControl(np.array([1.0, -1.0]), np.eye(1))
+    with pytest.raises(ControlError, match="R must be positive definite"):
+        OneStepControl(np.ones(2), np.zeros((1, 1)))
+    with pytest.raises(ControlError, match="form"):
+        OneStepControl(np.ones(2), np.eye(1), "lqr")
+    control = OneStepControl(np.ones(2), np.eye(1))
+    model_t = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 1.0, 0.0]])  # [F G w], p = 2, n = 1
+    assert np.isfinite(control(model_t, np.ones(2))).all()
+    for row, col in ((0, 2), (1, 3)):  # a NaN in G (S not positive definite), in w (u not finite)
+        bad = model_t.copy()
+        bad[row, col] = np.nan
+        with pytest.raises(ControlError, match="R \\+ Gᵀ Q G"):
+            control(bad, np.ones(2))

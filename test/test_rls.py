@@ -413,3 +413,19 @@ def test_theta_layout_matches_eq_22() -> None:
 def test_bad_joint_count(n) -> None:
     with pytest.raises(RlsError, match="n_joints"):
         Rls(n, RlsConfig())
+
+
+def test_model_view_is_read_only_and_follows_the_estimate() -> None:
+    """model_view() is Θᵀ = [F G w] without a copy, read-only, as of the last change."""
+    rng = np.random.default_rng(21)
+    rls = Rls(N, RlsConfig())
+    for zz, xx in exciting_data(rng, *random_system(rng), 5):
+        rls.update(zz, xx)
+    view = rls.model_view()
+    np.testing.assert_array_equal(view, np.hstack([rls.F, rls.G, rls.w[:, None]]))
+    with pytest.raises(ValueError, match="read-only"):
+        view[0, 0] = 1.0
+    rls.update(np.ones(M), np.ones(P_DIM))
+    np.testing.assert_array_equal(rls.model_view(), rls.theta.T)
+    rls.undo()
+    np.testing.assert_array_equal(rls.model_view(), view)

@@ -14,16 +14,21 @@ told the sample index, never a clock.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from apc_feedback.linearize import SeriesForm, initial_model
-from apc_feedback.optimal import one_step_control, receding_horizon_control, validate_weights
+from apc_feedback.optimal import (
+    OneStepControl,
+    receding_horizon_control,
+    validate_weights,
+)
 from apc_feedback.rls import Rls, RlsConfig, RlsError
 
 
@@ -31,9 +36,8 @@ class FeedbackError(ValueError):
     """Bad feedback configuration or input; the message names the parameter."""
 
 
-@dataclass(frozen=True)
-class FeedbackOutput:
-    """One sample of a feedback law.
+class FeedbackOutput(NamedTuple):
+    """One sample of a feedback law (a named tuple: made every sample, cheaply).
 
     Attributes
     ----------
@@ -243,25 +247,50 @@ class AdaptiveFeedback(FeedbackLaw):
     def __init__(self, model: pin.Model, config: AdaptiveConfig) -> None:
         super().__init__(model.nv)
         self.model = model
-        self.config = config
-        n = model.nv
-        self.Q = np.diag(
-            np.concatenate([np.full(n, config.q_position), np.full(n, config.q_velocity)])
-        )
-        self.R = config.r * np.eye(n)
-        validate_weights(self.Q, self.R, 2 * n, n)
-        self.rls = Rls(n, config.rls_config(n))
-        self._Q_aug = np.diag(np.concatenate([np.diag(self.Q), np.full(n, config.q_integral)]))
+        self.rls = Rls(model.nv, config.rls_config(model.nv))
+        self._set_weights(config)
         self.reset()
 
+    def _set_weights(self, config: AdaptiveConfig) -> None:
+        """Everything derived from the config's weights and forms (not identifier state)."""
+        n = self.n_joints
+        q_diagonal = np.concatenate([np.full(n, config.q_position), np.full(n, config.q_velocity)])
+        Q, R = np.diag(q_diagonal), config.r * np.eye(n)
+        validate_weights(Q, R, 2 * n, n)
+        self.config, self.Q, self.R = config, Q, R
+        self._one_step = OneStepControl(q_diagonal, R, config.control_form)
+        self._Q_aug = np.diag(np.concatenate([q_diagonal, np.full(n, config.q_integral)]))
+        self._identify_applied = config.identify_with == "applied"
+
+    def reconfigure(self, config: AdaptiveConfig) -> None:
+        """Take new weights (``q_position``, ``q_velocity``, ``r``) at the next sample and keep
+        what was identified; the identifier's own settings cannot change while it runs.
+
+        Raises
+        ------
+        FeedbackError
+            ``config`` changes a setting of the identifier (rho, alpha, forgetting,
+            trace_max).
+        """
+        if config.rls_config(self.n_joints) != self.config.rls_config(self.n_joints):
+            raise FeedbackError("the identifier's settings cannot change while it runs")
+        self._set_weights(config)
+
     def reset(self) -> None:
+        n = self.n_joints
         self._started = False
         self.rejected_updates = 0
         self.projected_updates = 0
-        self._dx_prev = np.zeros(2 * self.n_joints)
-        self._du_prev = np.zeros(self.n_joints)
-        self._u_n_prev = np.zeros(self.n_joints)
-        self.integral = np.zeros(self.n_joints)
+        # z(k-1) = (dx(k-1), du(k-1), 1) of Eq. 23, filled in place: dx(k) goes into its first
+        # 2n entries once du(k) is known, du(k-1) is written when sample k arrives.
+        self._z = np.zeros(3 * n + 1)
+        self._z[-1] = 1.0
+        self._z_dx, self._z_du = self._z[: 2 * n], self._z[2 * n : 3 * n]
+        self._dx = np.empty(2 * n)
+        self._dx_q, self._dx_qd = self._dx[:n], self._dx[n:]
+        self._du_prev = np.zeros(n)
+        self._u_n_prev = np.zeros(n)
+        self.integral = np.zeros(n)
 
     def update(
         self,
@@ -274,11 +303,15 @@ class AdaptiveFeedback(FeedbackLaw):
         u_n: np.ndarray,
         applied: np.ndarray | None,
     ) -> FeedbackOutput:
-        dx = np.concatenate([q - q_d, qd - qd_d])
-        if not np.all(np.isfinite(dx)):
+        dx = self._dx
+        np.subtract(q, q_d, out=self._dx_q)
+        np.subtract(qd, qd_d, out=self._dx_qd)
+        # One reduction instead of an isfinite per entry (a sum past 1e308 counts as not finite).
+        if not math.isfinite(float(np.add.reduce(dx))):
             raise FeedbackError(f"state error is not finite at sample {k}")
         residual = None
         rejected = False
+        trace_p = float("nan")
         if not self._started:
             F0, G0 = initial_model(
                 self.model, q_d, qd_d, u_n, self.config.period, self.config.initial_model
@@ -286,26 +319,29 @@ class AdaptiveFeedback(FeedbackLaw):
             self.rls.reset(F0, G0)
             self._started = True
         else:
-            if applied is not None and self.config.identify_with == "applied":
-                du_prev = applied - self._u_n_prev
+            if applied is not None and self._identify_applied:
+                np.subtract(applied, self._u_n_prev, out=self._z_du)
             else:
-                du_prev = self._du_prev
-            z = Rls.regressor(self._dx_prev, du_prev)
+                self._z_du[:] = self._du_prev
             try:
-                residual = self.rls.update(z, dx).residual
+                step = self.rls.update(self._z, dx)
+                residual, trace_p = step.residual, step.trace_p
                 if self.config.project_g and not self._g_physical():
                     # Unphysical Ĝ: take the step back, keep the last physical estimate.
                     self.rls.undo()
                     self.projected_updates += 1
+                    trace_p = self.rls.trace_p
             except RlsError:
                 # Keep controlling with the last good estimate; the node counts and reports it.
                 rejected = True
                 self.rejected_updates += 1
+        if trace_p != trace_p:  # NaN: no accepted update this sample
+            trace_p = self.rls.trace_p
         du = self._control(dx)
-        self._dx_prev = dx
+        self._z_dx[:] = dx
         self._du_prev = du
-        self._u_n_prev = np.array(u_n, dtype=float)
-        return FeedbackOutput(du=du, residual=residual, trace_p=self.rls.trace_p, rejected=rejected)
+        self._u_n_prev[:] = u_n
+        return FeedbackOutput(du=du, residual=residual, trace_p=trace_p, rejected=rejected)
 
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
@@ -317,17 +353,16 @@ class AdaptiveFeedback(FeedbackLaw):
         explaining a refused step's residual as a jump of ``ŵ`` destabilised an hour-long run.
         """
         n = self.n_joints
-        return bool(np.all(np.diagonal(self.rls.G[n:]) > 0.0))
+        # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
+        return bool((self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal() > 0.0).all())
 
     def _control(self, dx: np.ndarray) -> np.ndarray:
         """Optimal control of the identified model (Eq. 35, or its extensions)."""
         config = self.config
+        if config.q_integral == 0.0 and config.horizon == 1:
+            return self._one_step(self.rls.model_view(), dx)
         F, G, w = self.rls.F, self.rls.G, self.rls.w
         if config.q_integral == 0.0:
-            if config.horizon == 1:
-                return one_step_control(
-                    F, G, w, self.Q, self.R, dx, config.control_form, check_weights=False
-                )
             return receding_horizon_control(
                 F, G, w, self.Q, self.R, dx, config.horizon, check_weights=False
             )

@@ -156,9 +156,6 @@ PARAMS: tuple[Param, ...] = (
 RUNTIME_PARAMS: dict[str, Param] = {p.name: p for p in PARAMS if not p.read_only}
 #: Which family of runtime parameters each law uses.
 RUNTIME_FAMILY = {"adaptive": "adaptive.", "computed_torque": "gains.", "pd": "gains."}
-#: Attributes of :class:`AdaptiveFeedback` derived from its weights (not identifier state):
-#: a runtime change builds a fresh law with the new config and copies these into the running one.
-ADAPTIVE_WEIGHT_ATTRS = ("config", "Q", "R", "_Q_aug")
 #: Samples waiting for their other half; beyond this the oldest is dropped (bounded memory).
 MAX_PENDING = 100
 
@@ -265,11 +262,7 @@ class FeedbackNode(Node):
         law = self.law
         try:
             if isinstance(law, AdaptiveFeedback):
-                config = dataclasses.replace(law.config, **subset(updates, "adaptive."))
-                fresh = AdaptiveFeedback(law.model, config)
-                for attr in ADAPTIVE_WEIGHT_ATTRS:
-                    if hasattr(fresh, attr):
-                        setattr(law, attr, getattr(fresh, attr))
+                law.reconfigure(dataclasses.replace(law.config, **subset(updates, "adaptive.")))
             elif isinstance(law, (ComputedTorque, PD)):
                 law.gains = dataclasses.replace(law.gains, **subset(updates, "gains."))
         except ValueError as exc:  # checked when set; a law that still refuses keeps its gains

@@ -17,17 +17,21 @@ unique because ``R ≻ 0`` and ``Q ⪰ 0`` make ``R + Gᵀ Q G ≻ 0``. The pape
 which applies ``F`` to the bias as well; the two agree when ``w = 0`` or ``F = I``. See
 ``/work/shared/DESIGN.md``, "Where the printed paper is wrong".
 
-The linear system is solved (``numpy.linalg.solve``), never inverted. No ROS here.
+The linear system is solved (``numpy.linalg.solve``, or LAPACK's Cholesky solver ``dposv`` in
+the per-sample :class:`OneStepControl`), never inverted. No ROS here.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
 import numpy as np
+from scipy.linalg import lapack
 
 __all__ = [
     "ControlError",
+    "OneStepControl",
     "closed_loop_eigenvalues",
     "one_step_control",
     "one_step_cost",
@@ -244,6 +248,81 @@ def one_step_control(
     y = Fa @ xa + wa if form == "exact" else Fa @ (xa + wa)
     GtQ = Ga.T @ Qa
     return -_solve_spd(Ra + GtQ @ Ga, GtQ @ y)
+
+
+class OneStepControl:
+    """Eq. 35 for the per-sample loop: fixed diagonal ``Q`` and ``R``, preallocated buffers.
+
+    Takes the identified model as the RLS holds it, ``Θᵀ = [F G w]`` (p, p + n + 1), so
+    ``F x + w`` is one product with ``(x, 0, 1)``. ``S = R + Gᵀ Q G`` is symmetric positive
+    definite and solved by Cholesky (LAPACK ``dposv``, from one triangle of ``S``), which
+    costs a fifth of ``numpy.linalg.solve`` at this size. Equals :func:`one_step_control`
+    with ``Q = diag(q_diagonal)`` to rounding (the tests check 1e-12).
+
+    Parameters
+    ----------
+    q_diagonal : array_like, shape (p,)
+        Diagonal of ``Q``, finite and >= 0.
+    R : array_like, shape (n, n)
+        Symmetric positive definite.
+    form : {"exact", "printed"}
+        As in :func:`one_step_control`.
+
+    Raises
+    ------
+    ControlError
+        On construction, for bad weights or form (the message names it).
+    """
+
+    def __init__(self, q_diagonal: Any, R: Any, form: Form = "exact") -> None:
+        if form not in _FORMS:
+            raise ControlError(f"form must be one of {', '.join(_FORMS)}, got {form!r}")
+        q = np.array(q_diagonal, dtype=float)
+        if q.ndim != 1 or q.shape[0] < 1:
+            raise ControlError(f"q_diagonal must have shape (p,), got {q.shape}")
+        p = q.shape[0]
+        R = np.asarray(R, dtype=float)
+        n = R.shape[0] if R.ndim == 2 else 0
+        _, R = validate_weights(np.diag(q), R, p, n)
+        self.p, self.n = p, n
+        self.q_diagonal = q
+        self.R = R
+        self.exact = form == "exact"
+        self._xa = np.zeros(p + n + 1)
+        self._xa_x = self._xa[:p]
+        self._y = np.empty(p)
+        self._gtq = np.empty((n, p))
+        self._S = np.empty((n, n))
+        self._b = np.empty(n)
+
+    def __call__(self, model_t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``δu(k)`` for the model ``Θᵀ = [F G w]`` and the state ``x`` (both finite).
+
+        Raises
+        ------
+        ControlError
+            If ``R + Gᵀ Q G`` is not numerically positive definite or the result is not
+            finite.
+        """
+        p, xa = self.p, self._xa
+        if self.exact:
+            self._xa_x[:] = x  # (x, 0, 1): F x + w
+            xa[-1] = 1.0
+        else:
+            np.add(x, model_t[:, -1], out=self._xa_x)  # (x + w, 0, 0): F (x + w)
+            xa[-1] = 0.0
+        np.dot(model_t, xa, out=self._y)
+        G = model_t[:, p : p + self.n]
+        gtq = np.multiply(G.T, self.q_diagonal, out=self._gtq)  # Gᵀ Q for diagonal Q
+        S = np.dot(gtq, G, out=self._S)
+        S += self.R
+        np.dot(gtq, self._y, out=self._b)
+        _, u, info = lapack.dposv(S, self._b)
+        if info != 0:
+            raise ControlError("R + Gᵀ Q G is not positive definite (check R)")
+        if not math.isfinite(float(np.add.reduce(u))):
+            raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
+        return np.negative(u, out=u)
 
 
 def closed_loop_eigenvalues(F: Any, G: Any, K: Any) -> np.ndarray:

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -146,9 +146,8 @@ class RlsConfig:
         return RlsConfig(**{k: d[k] for k in known if k in d})
 
 
-@dataclass(frozen=True)
-class RlsStep:
-    """Diagnostics of one :meth:`Rls.update`.
+class RlsStep(NamedTuple):
+    """Diagnostics of one :meth:`Rls.update` (a named tuple: made every sample, cheaply).
 
     Attributes
     ----------
@@ -204,15 +203,19 @@ class Rls:
         self._config = config
         self._exponential = config.forgetting == "exponential"
         m, p = self._m, self._p
-        # State, double-buffered: an update is computed into the spares and swapped in only
-        # when finite, so a rejected update leaves the state untouched without allocating.
-        self._theta = np.zeros((m, p))
-        self._theta_spare = np.empty((m, p))
-        self._P = np.empty((m, m))
-        self._P_spare = np.empty((m, m))
-        self._pz = np.empty(m)  # P z
-        self._e = np.empty(p)  # residual
+        # State: P (m, m) stacked over Θᵀ = [F G w] (p, m) in one (m + p, m) array, so one
+        # product gives P z and Θᵀ z and one outer product updates both (Eqs. 29-30).
+        # Double-buffered: an update is computed into the spare and swapped in only when
+        # finite, so a rejected update leaves the state untouched without allocating.
+        self._buffers = (np.empty((m + p, m)), np.empty((m + p, m)))
+        self._views = tuple(_BufferViews(buf, m) for buf in self._buffers)
+        self._cur = 0
+        self._traces = [0.0, 0.0]
+        self._r = np.empty(m + p)  # [P z; Θᵀ z]
+        self._pz = self._r[:m]
+        self._theta_z = self._r[m:]  # Θᵀ z, then overwritten with -e
         self._k = 0
+        self._can_undo = False
         self._theta0 = np.zeros((m, p))
         self._P0 = config.alpha * np.eye(m)
         self._restore()
@@ -246,32 +249,42 @@ class Rls:
     @property
     def theta(self) -> np.ndarray:
         """Copy of Θ = [F G w]ᵀ, shape (3n+1, 2n) (Eq. 22)."""
-        return self._theta.copy()
+        return self._views[self._cur].theta_t.T.copy()
 
     @property
     def P(self) -> np.ndarray:
         """Copy of P, shape (3n+1, 3n+1), symmetric positive definite."""
-        return self._P.copy()
+        return self._views[self._cur].P.copy()
 
     @property
     def F(self) -> np.ndarray:
         """Copy of F̂, shape (2n, 2n)."""
-        return self._theta[: self._p].T.copy()
+        return self._views[self._cur].theta_t[:, : self._p].copy()
 
     @property
     def G(self) -> np.ndarray:
         """Copy of Ĝ, shape (2n, n)."""
-        return self._theta[self._p : self._p + self._n].T.copy()
+        return self._views[self._cur].theta_t[:, self._p : self._p + self._n].copy()
 
     @property
     def w(self) -> np.ndarray:
         """Copy of ŵ, shape (2n,)."""
-        return self._theta[self._p + self._n].copy()
+        return self._views[self._cur].theta_t[:, self._p + self._n].copy()
 
     @property
     def trace_p(self) -> float:
         """trace(P)."""
-        return float(np.trace(self._P))
+        return self._traces[self._cur]
+
+    def model_view(self) -> np.ndarray:
+        """Read-only view of ``Θᵀ = [F̂ Ĝ ŵ]``, shape (2n, 3n+1), without a copy.
+
+        For a per-sample loop that reads the model right after an update (the feedback law's
+        Eq. 35). The view shows the estimate as it is now and is not valid after the next
+        :meth:`update`, :meth:`undo` or :meth:`reset`; use :attr:`F`, :attr:`G`, :attr:`w` to
+        keep one.
+        """
+        return self._views[self._cur].theta_t_readonly
 
     # ------------------------------------------------------------------ state changes
     def reset(
@@ -336,8 +349,10 @@ class Rls:
         self._restore()
 
     def _restore(self) -> None:
-        self._theta[...] = self._theta0
-        self._P[...] = self._P0
+        views = self._views[self._cur]
+        views.P[...] = self._P0
+        views.theta_t[...] = self._theta0.T
+        self._traces[self._cur] = float(views.diagonal.sum())
         self._k = 0
         self._can_undo = False
 
@@ -350,10 +365,9 @@ class Rls:
         RlsError
             If there is no update to take back (only the last one can be).
         """
-        if not getattr(self, "_can_undo", False):
+        if not self._can_undo:
             raise RlsError("undo: no update to take back")
-        self._theta, self._theta_spare = self._theta_spare, self._theta
-        self._P, self._P_spare = self._P_spare, self._P
+        self._cur = 1 - self._cur
         self._k -= 1
         self._can_undo = False
 
@@ -380,64 +394,70 @@ class Rls:
             would make Θ or P non-finite (or a diagonal entry of P non-positive). The state is
             unchanged then; the caller may count the failure and carry on, or :meth:`reset`.
         """
-        z = _vector("z", z, self._m)
-        dx_next = _vector("dx_next", dx_next, self._p)
-        # Overflow shows up as inf/nan and is rejected below; no RuntimeWarning on the way.
-        with np.errstate(all="ignore"):
-            theta_new, P_new, gamma, trace_p, clipped = self._candidate(z, dx_next)
-        self._theta_spare, self._theta = self._theta, theta_new
-        self._P_spare, self._P = self._P, P_new
+        m = self._m
+        if not (type(z) is np.ndarray and z.dtype == np.float64 and z.shape == (m,)):
+            z = _vector("z", z, m)
+        if not (
+            type(dx_next) is np.ndarray
+            and dx_next.dtype == np.float64
+            and dx_next.shape == (self._p,)
+        ):
+            dx_next = _vector("dx_next", dx_next, self._p)
+        gamma, trace_p, clipped = self._candidate(z, dx_next)
+        self._cur = 1 - self._cur
+        self._traces[self._cur] = trace_p
         self._k += 1
         self._can_undo = True
-        return RlsStep(residual=self._e.copy(), gamma=gamma, trace_p=trace_p, clipped=clipped)
+        return RlsStep(
+            residual=np.negative(self._theta_z), gamma=gamma, trace_p=trace_p, clipped=clipped
+        )
 
-    def _candidate(
-        self, z: np.ndarray, dx_next: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, float, float, bool]:
-        """Compute Θ(k+1), P(k+1) into the spare buffers; raise RlsError if not finite."""
+    # Overflow on the way to a rejected update is expected, not a warning (the decorator form
+    # of errstate costs half the with-statement's).
+    @np.errstate(all="ignore")
+    def _candidate(self, z: np.ndarray, dx_next: np.ndarray) -> tuple[float, float, bool]:
+        """Compute Θ(k+1), P(k+1) into the spare buffer; raise RlsError if not finite.
+
+        Finiteness of the inputs is not checked up front: a non-finite ``z`` or ``dx_next``
+        makes the candidate non-finite, and only then are the inputs examined to name the
+        culprit. One reduction over the candidate replaces a check per array.
+        """
         rho = self._config.rho
-        P, theta = self._P, self._theta
-        pz, e = self._pz, self._e
-
-        np.dot(P, z, out=pz)  # P z
+        now, new = self._views[self._cur], self._views[1 - self._cur]
+        r = self._r
+        np.dot(now.stacked, z, out=r)  # [P z; Θᵀ z]
+        pz = self._pz
         denom = float(np.dot(z, pz)) + rho
-        if not (math.isfinite(denom) and denom > 0.0):
+        if not (denom > 0.0 and math.isfinite(denom)):
+            _name_non_finite(z, dx_next)
             raise RlsError(f"update rejected: zᵀ P z + rho = {denom!r} (z too large?)")
         gamma = 1.0 / denom
-        np.dot(z, theta, out=e)  # Θᵀ z
-        np.subtract(dx_next, e, out=e)  # Eq. 26
-        if not np.isfinite(e).all():
-            raise RlsError("update rejected: residual is not finite")
-
-        # Eq. 29: Θ + γ (P z) eᵀ
-        theta_new = self._theta_spare
-        np.multiply.outer(pz, e, out=theta_new)
-        theta_new *= gamma
-        theta_new += theta
-        # Eq. 30: P - γ (P z)(P z)ᵀ, using P zzᵀ P = (P z)(P z)ᵀ for symmetric P. Every step is
-        # elementwise on exactly symmetric arrays, so the result is exactly symmetric.
-        P_new = self._P_spare
-        np.multiply.outer(pz, pz, out=P_new)
-        P_new *= -gamma
-        P_new += P
-        if self._exponential:
-            P_new /= rho
-        trace_p = float(np.trace(P_new))
+        np.subtract(self._theta_z, dx_next, out=self._theta_z)  # -e, Eq. 26
+        # [P; Θᵀ] - γ [P z; -e] (P z)ᵀ: Eq. 30's P - γ (P z)(P z)ᵀ (P zzᵀ P = (P z)(P z)ᵀ for
+        # symmetric P) and Eq. 29's Θᵀ + γ e (P z)ᵀ in one pass. The P block is built
+        # elementwise from exactly symmetric arrays, so it stays exactly symmetric.
+        stacked = new.stacked
+        np.multiply.outer(r, pz, out=stacked)
+        stacked *= -gamma
+        stacked += now.stacked
+        # Forgetting (Eq. 30 corrected) and the wind-up guard as one scaling of P.
+        trace_p = float(_sum(new.diagonal))
+        scale = 1.0 / rho if self._exponential else 1.0
         clipped = False
         trace_max = self._config.trace_max
-        if trace_max is not None and trace_p > trace_max:
-            P_new *= trace_max / trace_p
-            trace_p = float(np.trace(P_new))
+        if trace_max is not None and trace_p * scale > trace_max:
+            scale = trace_max / trace_p
             clipped = True
-        if not (
-            math.isfinite(trace_p)
-            and np.isfinite(theta_new).all()
-            and np.isfinite(P_new).all()
-            and (np.diagonal(P_new) > 0.0).all()
-        ):
+        if scale != 1.0:
+            new.P *= scale
+            trace_p *= scale  # trace(s P) = s trace(P), to rounding
+        # One reduction: a non-finite entry anywhere makes the sum non-finite.
+        if not (math.isfinite(float(_sum(stacked, None))) and _min(new.diagonal) > 0.0):
+            _name_non_finite(z, dx_next)
+            if not np.isfinite(self._theta_z).all():
+                raise RlsError("update rejected: residual is not finite")
             raise RlsError("update rejected: Θ or P would become non-finite or P indefinite")
-
-        return theta_new, P_new, gamma, trace_p, clipped
+        return gamma, trace_p, clipped
 
     # ------------------------------------------------------------------ helpers
     def predict(self, z: np.ndarray) -> np.ndarray:
@@ -448,7 +468,7 @@ class Rls:
         RlsError
             If ``z`` is not a finite (3n+1,) vector.
         """
-        return _vector("z", z, self._m) @ self._theta
+        return self._views[self._cur].theta_t @ _vector("z", z, self._m)
 
     @staticmethod
     def regressor(dx: np.ndarray, du: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -489,6 +509,31 @@ class Rls:
         out[2 * n : 3 * n] = du_a
         out[3 * n] = 1.0
         return out
+
+
+# The ufunc reductions, without ndarray.sum's Python wrapper (a third of its cost here).
+_sum = np.add.reduce
+_min = np.minimum.reduce
+
+
+class _BufferViews:
+    """Named views of one state buffer ``[P; Θᵀ]`` (made once: slicing per sample costs)."""
+
+    def __init__(self, stacked: np.ndarray, m: int) -> None:
+        self.stacked = stacked
+        self.P = stacked[:m]
+        self.theta_t = stacked[m:]
+        self.diagonal = self.P.diagonal()
+        self.theta_t_readonly = stacked[m:].view()
+        self.theta_t_readonly.flags.writeable = False
+
+
+def _name_non_finite(z: np.ndarray, dx_next: np.ndarray) -> None:
+    """Raise RlsError naming ``z`` or ``dx_next`` if it has a non-finite entry."""
+    if not np.isfinite(z).all():
+        raise RlsError("z must be finite")
+    if not np.isfinite(dx_next).all():
+        raise RlsError("dx_next must be finite")
 
 
 def _vector(name: str, value: Any, size: int) -> np.ndarray:

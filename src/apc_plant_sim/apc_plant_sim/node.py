@@ -75,6 +75,12 @@ PARAMS: tuple[Param, ...] = (
     ),
     Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
     Param("enforce_torque_limits", True, "clip |tau| to the URDF effort limits"),
+    Param(
+        "forward_dynamics",
+        "aba",
+        "how q'' is computed: 'aba' (articulated body, fast) or 'crba' (D(q) and solve); "
+        "same dynamics",
+    ),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
     Param(
         "wait_for_subscribers",
@@ -160,6 +166,7 @@ class PlantNode(Node):
                 period=values["period"],
                 step=values["step"],
                 enforce_torque_limits=values["enforce_torque_limits"],
+                forward_dynamics=values["forward_dynamics"],
             )
         except PlantError as exc:
             raise ConfigError(f"parameter '{str(exc).split()[0]}': {exc}") from None
