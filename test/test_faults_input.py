@@ -541,7 +541,9 @@ def compare_with_offline(capture: Capture, offline: Any) -> None:
     est = capture.first(wire.ESTIMATE)
     stamps_ns = [k * T_NS for k in range(n)]
     assert sorted(js) == stamps_ns
-    assert sorted(sp) == sorted(ff) == sorted(fb) == sorted(est) == stamps_ns
+    assert sorted(fb) == sorted(est) == stamps_ns
+    # The feedforward runs one sample ahead (lookahead 1): its last set point answers no state.
+    assert sorted(sp) == sorted(ff) == [*stamps_ns, n * T_NS]
     for k, stamp in enumerate(stamps_ns):
         s = wire.joint_state_to_arrays(js[stamp], NAMES)
         np.testing.assert_array_equal(s.position, offline.q[k])
@@ -779,7 +781,8 @@ def test_stale_duplicate_and_off_grid_joint_states(graph):
         assert counter(node, "rejected") == 3
         assert errors(node) == 0
     assert sorted(plant.got[wire.FEEDBACK_TORQUE]) == [0, T_NS, 2 * T_NS]
-    assert sorted(plant.got[wire.SETPOINT]) == [0, T_NS, 2 * T_NS]
+    # The feedforward answers sample k with k + 1 as well (lookahead 1).
+    assert sorted(plant.got[wire.SETPOINT]) == [0, T_NS, 2 * T_NS, 3 * T_NS]
 
 
 def test_feedback_keeps_the_first_of_two_states_with_one_stamp(graph):
@@ -959,9 +962,11 @@ def test_goal_too_fast_for_the_wire_is_dropped_and_the_last_set_point_held(graph
 # ----------------------------------------------------------------------------------------------
 def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(graph):
     """Lockstep plant, the test playing both controllers: a torque before sample 0 is sent, in
-    the future, off the grid or negative is rejected; an answer to an integrated sample is
-    ignored (stale / out of order); a second torque for the current sample does not replace or
-    add to the first; a huge valid torque is clipped to the URDF limits and counted."""
+    the future (a nominal torque: beyond the feedforward's lookahead), off the grid or negative
+    is rejected; an answer to an integrated sample is ignored (stale / out of order); a second
+    torque for the current sample does not replace or add to the first; a nominal torque one
+    sample ahead is kept for its sample; a huge valid torque is clipped to the URDF limits and
+    counted."""
     from apc_plant_sim.plant import Plant
     from apc_plant_sim.scenario import build
 
@@ -1014,13 +1019,15 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     np.testing.assert_array_equal(got.velocity, step.qd)
     np.testing.assert_array_equal(got.effort, a)
 
-    # Sample 1: future, off grid, negative -> rejected; answers to sample 0 -> stale.
-    for stamp in (2 * T_NS, T_NS + 5, -T_NS):
+    # Sample 1: too far ahead, off grid, negative -> rejected; answers to sample 0 -> stale.
+    for stamp in ((wire.MAX_LOOKAHEAD + 2) * T_NS, T_NS + 5, -T_NS):
         torque(ff_pub, stamp, a)
     torque(ff_pub, 0, a)
+    torque(fb_pub, 2 * T_NS, np.zeros(N))  # a feedback torque is never ahead of the state
     torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDBACK_TORQUE}") == 1)
     graph.spin_until(lambda: counter(plant, ff_key) == 4)
+    graph.spin_until(lambda: counter(plant, fb_key) == 1)
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDFORWARD_TORQUE}") == 1)
     torque(ff_pub, T_NS, a)
     torque(fb_pub, T_NS, np.zeros(N))
@@ -1028,7 +1035,7 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     reference.step(a)
 
     # Sample 2: an answer to sample 0 is out of order; the rejected future torque for sample 2
-    # was not kept: with the feedback torque alone the plant does not step.
+    # was not kept: with the nominal torque missing the plant does not step.
     torque(ff_pub, 0, a)
     torque(fb_pub, 2 * T_NS, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"out_of_order.{wire.FEEDFORWARD_TORQUE}") == 1)
@@ -1037,6 +1044,7 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     # A huge but valid torque is clipped to the effort limits, and counted.
     huge = np.array([1e5, -1e5, 1e5])
     torque(ff_pub, 2 * T_NS, huge)
+    torque(ff_pub, 3 * T_NS, a)  # one sample ahead, as the feedforward node sends it: kept
     graph.spin_until(lambda: 3 * T_NS in states, what="sample 3")
     limit = built.plant_robot.effort_limit
     applied = wire.joint_state_to_arrays(states[3 * T_NS], NAMES).effort
@@ -1047,8 +1055,14 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     )
     assert counter(plant, "saturated_samples") == 1
     assert all(counter(plant, f"saturated.{name}") == 1 for name in NAMES)
-    assert counter(plant, fb_key) == 0
-    assert counter(plant, "rejected") == 4
+    # Sample 3 needs only its feedback torque now: the nominal one came ahead.
+    torque(fb_pub, 3 * T_NS, np.zeros(N))
+    graph.spin_until(lambda: 4 * T_NS in states, what="sample 4")
+    np.testing.assert_array_equal(
+        wire.joint_state_to_arrays(states[4 * T_NS], NAMES).position, reference.step(a).q
+    )
+    assert counter(plant, fb_key) == 1
+    assert counter(plant, "rejected") == 5
     assert errors(plant) == 0
 
 

@@ -69,7 +69,8 @@ def test_goal_is_executed_after_the_current_motion(graph):
     plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(plant_params)))
     graph.spin_until(lambda: plant.done, timeout_s=60)
     assert plant.exit_code == 0
-    graph.spin_until(lambda: len(setpoints) == scenario.n_samples + 1)
+    # Set points 0 .. n_samples, and the lookahead beyond the last joint state.
+    graph.spin_until(lambda: len(setpoints) == scenario.n_samples + 2)
     period_ns = 10_000_000
     q_end = np.deg2rad(scenario.q_goal_deg)
     plan = Waypoints(q_end, np.array([0.3, 0.6]), targets)

@@ -144,7 +144,8 @@ def test_replay_into_fresh_feedback_gives_recorded_torques_exactly(recorded, ros
         ctx, nodes, lambda: player.done and len(collector.messages) >= len(expected), 20
     )
     assert ok, f"player done: {player.done}, torques: {len(collector.messages)}/{len(expected)}"
-    assert player.published == {JS: n_states, SP: n_states}
+    # The feedforward ran one sample ahead: one set point more than joint states.
+    assert player.published == {JS: n_states, SP: n_states + 1}
     assert_alone(collector, {JS: 1, SP: 1, FB: 1})
     assert feedback.diagnostics.counters == {"samples": n_states}
     got = {wire.stamp_to_ns(m.header.stamp): m for m in collector.messages}
@@ -183,8 +184,9 @@ def test_default_topics_leave_out_clock_and_diagnostics(recorded, ros):
         "/" + s.name for s in wire.TOPICS if s.name not in (wire.CLOCK, wire.DIAGNOSTICS)
     }
     assert spin_until(ctx, nodes, lambda: player.done, 5)
-    # The first sample of every recorded topic (the goal topic holds no message).
-    assert sum(player.published.values()) == 5
+    # The first sample of every recorded topic (the goal topic holds no message), and the set
+    # point and nominal torque of sample 1, which the feedforward sent ahead at sim time 0.
+    assert sum(player.published.values()) == 7
 
 
 def test_rate_two_takes_half_the_wall_time(recorded, ros):

@@ -353,3 +353,31 @@ def test_nonzero_end_velocity_can_be_allowed() -> None:
     traj = Waypoints([0.0], [1.0], [[1.0]], velocities=[[0.5]], allow_nonzero_end_velocity=True)
     np.testing.assert_allclose(traj.evaluate_segment(0, 1.0)[1], [0.5], atol=1e-12)
     np.testing.assert_array_equal(traj.sample(1.0)[1], [0.0])  # held at rest afterwards
+
+
+def test_feedforward_block_sampling_equals_sampling_each_time(paper: FourThreeFour) -> None:
+    """Feedforward reads the plan in blocks; every set point is the bits of trajectory.sample,
+    across block boundaries, before/after the motion, and after the plan changes mid-block."""
+    import pinocchio as pin
+
+    from apc_feedforward.nominal import BLOCK, Feedforward
+
+    model = pin.buildSampleModelManipulator()
+    n = model.nv
+    start = np.zeros(n)
+    first = Quintic(start, np.full(n, 0.5), 1.0)
+    ff = Feedforward(model, first, 0.01, start_k=5)
+    data = model.createData()
+    for k in [*range(0, 2 * BLOCK + 7), 300, 3, 4]:  # jumps back and forth refill the block
+        sp = ff.sample(k)
+        q, qd, qdd = first.sample((k - 5) * 0.01)
+        for got, want in ((sp.q, q), (sp.qd, qd), (sp.qdd, qdd)):
+            np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(sp.u_n, pin.rnea(model, data, q, qd, qdd))
+        with pytest.raises(ValueError, match="read-only"):
+            sp.q[0] = 1.0
+    second = Quintic(np.full(n, 0.5), start, 2.0)
+    ff.sample(10)
+    ff.set_trajectory(second, 12)
+    for k in range(12, 40):
+        np.testing.assert_array_equal(ff.sample(k).q, second.sample((k - 12) * 0.01)[0])

@@ -1,9 +1,17 @@
 """``feedforward_node``: set points and nominal torques (Eqs. 2-8), one per joint state.
 
-On ``joint_states`` stamped ``kT`` it samples the current plan at ``kT`` and publishes, stamped
-``kT``, the set point on ``feedforward/setpoint`` and ``u_n(k)`` on ``feedforward/torque``.
-Driving both lockstep and real time from the plant's samples keeps every node on the same
-sample index ``k`` without a shared clock.
+On ``joint_states`` stamped ``kT`` it samples the current plan and publishes, stamped ``jT``,
+the set point on ``feedforward/setpoint`` and ``u_n(j)`` on ``feedforward/torque`` for every
+``j`` up to ``k + lookahead`` not sent yet. Driving both lockstep and real time from the plant's
+samples keeps every node on the same sample index ``k`` without a shared clock.
+
+Why ahead: the plan does not depend on the measured state (only its start does), so sample
+``k + 1`` can leave as soon as ``k``'s joint state arrives. The feedback then has set point
+``k`` in hand when joint state ``k`` arrives and the loop's critical path is plant -> feedback ->
+plant, one DDS hop shorter (the paper's parallel feedforward and feedback). With
+``lookahead = 0`` set point ``k`` answers joint state ``k`` (serial, one hop more). A goal that
+arrives mid-motion starts ``lookahead`` samples later than it would otherwise; the numbers of a
+lockstep run do not change.
 
 The plan: at the first joint state the arm's measured position becomes the start; if
 ``move.goal_deg`` is set the 4-3-4 move to it starts there, else the arm holds. Goals on
@@ -22,7 +30,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_feedforward.nominal import Feedforward, FeedforwardError
+from apc_feedforward.nominal import Feedforward, FeedforwardError, Setpoint
 from apc_feedforward.trajectory import (
     FourThreeFour,
     Quintic,
@@ -67,6 +75,14 @@ PARAMS: tuple[Param, ...] = (
     Param("move.segment_times", [0.2, 0.6, 0.2], "4-3-4 segment durations (s)"),
     Param("move.lift_off", 0.1, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
     Param("move.set_down", 0.9, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
+    Param(
+        "lookahead",
+        1,
+        "publish set points and nominal torques this many samples ahead of the joint state "
+        "(0 = answer joint state k with sample k)",
+        0,
+        wire.MAX_LOOKAHEAD,
+    ),
 )
 
 
@@ -110,7 +126,10 @@ class FeedforwardNode(Node):
         self.period_ns = wire.seconds_to_ns(self.period)
         self.feedforward: Feedforward | None = None
         self._pending: list[wire.Waypoints] = []
-        self._last: tuple[int, Any, Any] | None = None  # (stamp, setpoint msg, torque msg)
+        self.lookahead = int(values["lookahead"])
+        self._last_stamp: int | None = None  # newest joint state handled
+        self._sent: dict[int, Setpoint] = {}  # samples published for it, for a resend
+        self._next_k: int | None = None  # first sample not published yet
         self._last_q: np.ndarray | None = None  # last published q_d (where a fallback holds)
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self._setpoint_msg = JointTrajectory()
@@ -227,58 +246,86 @@ class FeedforwardNode(Node):
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
         stamp = sample.stamp_ns
-        if self._last is not None and stamp <= self._last[0]:
-            if stamp == self._last[0]:
-                # The plant re-sent sample k (lockstep resend): answer with the same messages.
+        if self._last_stamp is not None and stamp <= self._last_stamp:
+            if stamp == self._last_stamp:
+                # The plant re-sent sample k (lockstep resend): send what answered it again.
                 self.diagnostics.count("resent")
-                self.setpoint_pub.publish(self._last[1])
-                self.torque_pub.publish(self._last[2])
+                for j in sorted(self._sent):
+                    self._publish(self._sent[j])
             else:
                 error = wire.WireError(
-                    f"header.stamp: {stamp} ns is stale (sample {self._last[0]} ns already done)"
+                    f"header.stamp: {stamp} ns is stale (sample {self._last_stamp} ns already done)"
                 )
                 reject(self, self.diagnostics, wire.JOINT_STATES, error)
             return
-        with Stopwatch(self.diagnostics, "compute"):
-            try:
-                q_d, setpoint, torque = self._compute(k, sample.position)
-            except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc:
-                # The plan cannot be published (e.g. a motion too fast for the wire's bound):
-                # drop it and hold the last set point, so the loop keeps its nominal torque.
-                self.diagnostics.count("plan_errors")
-                self.get_logger().error(
-                    f"sample {k}: {exc}; dropping the plan and holding the last set point",
-                    throttle_duration_sec=1.0,
-                )
-                hold = self._last_q if self._last_q is not None else sample.position
-                self.feedforward = Feedforward(
-                    self.controller_robot.model, Quintic(hold, hold, self.period), self.period, k
-                )
-                try:
-                    q_d, setpoint, torque = self._compute(k, sample.position)
-                except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc2:
-                    reject(self, self.diagnostics, "feedforward_compute", exc2)
-                    return
-        self.setpoint_pub.publish(setpoint)
-        self.torque_pub.publish(torque)
-        self._last = (stamp, setpoint, torque)
-        self._last_q = q_d
+        self._last_stamp = stamp
+        first = k if self._next_k is None else max(self._next_k, k)
+        sent: dict[int, Setpoint] = {}
+        for j in range(first, k + self.lookahead + 1):
+            with Stopwatch(self.diagnostics, "compute"):
+                out = self._sample_or_hold(j, sample.position)
+            if out is None:
+                break
+            sp, setpoint, torque = out
+            self.setpoint_pub.publish(setpoint)
+            self.torque_pub.publish(torque)
+            sent[j] = sp
+            self._next_k = j + 1
+        # Everything that answers sample k or later (a resend of k asks for all of it).
+        self._sent = {j: v for j, v in {**self._sent, **sent}.items() if j >= k}
         self.diagnostics.count("samples")
 
-    def _compute(self, k: int, position: np.ndarray) -> tuple[np.ndarray, Any, Any]:
+    def _sample_or_hold(
+        self, k: int, position: np.ndarray
+    ) -> tuple[Setpoint, JointTrajectory, JointState] | None:
+        """Set point ``k`` and its messages; on a plan that cannot be published, hold the last
+        set point."""
+        try:
+            return self._compute(k, position)
+        except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc:
+            # The plan cannot be published (e.g. a motion too fast for the wire's bound):
+            # drop it and hold the last set point, so the loop keeps its nominal torque.
+            self.diagnostics.count("plan_errors")
+            self.get_logger().error(
+                f"sample {k}: {exc}; dropping the plan and holding the last set point",
+                throttle_duration_sec=1.0,
+            )
+            hold = self._last_q if self._last_q is not None else position
+            self.feedforward = Feedforward(
+                self.controller_robot.model, Quintic(hold, hold, self.period), self.period, k
+            )
+            try:
+                return self._compute(k, position)
+            except (wire.WireError, TrajectoryError, FeedforwardError, ValueError) as exc2:
+                reject(self, self.diagnostics, "feedforward_compute", exc2)
+                return None
+
+    def _compute(
+        self, k: int, position: np.ndarray
+    ) -> tuple[Setpoint, JointTrajectory, JointState]:
         """Set point and nominal torque of sample ``k`` as messages (validated for the wire)."""
         if self.feedforward is None:
             self._start(position, k)
         self._advance(k)
         assert self.feedforward is not None
         sp = self.feedforward.sample(k)
-        stamp = wire.sample_stamp_ns(k, self.period_ns)
+        setpoint, torque = self._messages(sp)
+        self._last_q = sp.q
+        return sp, setpoint, torque
+
+    def _messages(self, sp: Setpoint) -> tuple[JointTrajectory, JointState]:
+        stamp = wire.sample_stamp_ns(sp.k, self.period_ns)
         t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
         setpoint = wire.setpoint_to_msg(
             stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
         )
         torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
-        return sp.q, setpoint, torque
+        return setpoint, torque
+
+    def _publish(self, sp: Setpoint) -> None:
+        setpoint, torque = self._messages(sp)
+        self.setpoint_pub.publish(setpoint)
+        self.torque_pub.publish(torque)
 
 
 def main(args: list[str] | None = None) -> int:

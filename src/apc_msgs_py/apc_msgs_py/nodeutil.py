@@ -268,6 +268,29 @@ def _user_args(argv: Sequence[str]) -> list[str]:
     return args[: args.index("--ros-args")] if "--ros-args" in args else args
 
 
+#: Executors a node process can spin (:func:`make_executor`).
+EXECUTORS = ("events", "single")
+#: Environment variable that picks the executor of ``ros2 run`` nodes (default ``events``).
+EXECUTOR_ENV = "APC_EXECUTOR"
+
+
+def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
+    """``events``: rclpy's ``EventsExecutor``, ``single``: ``SingleThreadedExecutor``.
+
+    The events executor takes a message to its callback in ~22 us against ~120 us
+    (``bench/ros_loop.py``; two nodes ping-ponging a JointState, one process) and doubles the
+    lockstep samples per second; results are the same bit for bit. Only its ``spin_once`` is
+    used: its ``spin`` is broken in this build (``ROS_WHEELS.md``).
+    """
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == "single":
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f"executor must be one of {EXECUTORS}, got {kind!r}")
+
+
 def run_node(
     make_node: Callable[[], Node],
     *,
@@ -280,14 +303,19 @@ def run_node(
     """``main`` of a node executable; returns the process exit code.
 
     ``--help`` prints the parameters. A :class:`ConfigError` (or a model/wire error) while the
-    node is built prints one line naming the parameter and returns 2. SIGINT/SIGTERM end the
-    spin and the node is destroyed before ``rclpy`` shuts down. ``spin_until(node)`` returning
-    True ends a finite run (e.g. the plant after ``n_samples``).
+    node is built prints one line naming the parameter and returns 2. The node spins on
+    :func:`make_executor` of ``$APC_EXECUTOR`` (``events`` unless set to ``single``).
+    SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down.
+    ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``).
     """
     argv = list(sys.argv[1:] if args is None else args)
     if {"-h", "--help"} & set(_user_args(argv)):
         print_help(prog, summary, params)
         return 0
+    executor_kind = os.environ.get(EXECUTOR_ENV, "events") or "events"
+    if executor_kind not in EXECUTORS:
+        print(f"{prog}: {EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}", file=sys.stderr)
+        return 2
     # rclpy's SIGINT handler shuts the context down and then calls the handler it replaced. If
     # that is Python's default, a KeyboardInterrupt is also raised wherever Python happens to be,
     # e.g. inside rclpy's message conversion in take_message, which turns it into "RuntimeError:
@@ -313,7 +341,7 @@ def run_node(
             if rclpy.ok():
                 raise
             return 0  # stopped by a signal while the node was being built
-        executor = SingleThreadedExecutor()
+        executor = make_executor(executor_kind)
         executor.add_node(node)
         node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
         while rclpy.ok():

@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 import rclpy
 import yaml
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
-from apc_msgs_py.nodeutil import StopSignals, destroy_nodes
+from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
 from apc_msgs_py.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
@@ -151,23 +151,6 @@ class RunOutcome:
     message: str
     samples: int
     wall_s: float
-
-
-EXECUTORS = ("events", "single")
-
-
-def make_executor(kind: str, context: rclpy.Context) -> Any:
-    """``events``: rclpy's ``EventsExecutor`` (2x the samples/s of the single-threaded one in
-    ``make bench``; only its ``spin_once`` is used, its ``spin`` is broken in this build);
-    ``single``: ``SingleThreadedExecutor``. Lockstep results are the same bit for bit.
-    """
-    if kind == "events":
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor(context=context)
-    if kind == "single":
-        return SingleThreadedExecutor(context=context)
-    raise ValueError(f"executor must be one of {EXECUTORS}, got {kind!r}")
 
 
 def run_in_process(
@@ -299,7 +282,7 @@ def run_in_processes(
                 parameter_overrides=[Parameter("use_sim_time", value=True)],
                 custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
             )
-            executor = SingleThreadedExecutor(context=context)
+            executor = make_executor("events", context)
             executor.add_node(recorder)
 
             def start(name: str) -> None:

@@ -194,6 +194,10 @@ class PlantNode(Node):
         self._fb: dict[int, np.ndarray] = {}
         self._ff_latest: tuple[int, np.ndarray, float] | None = None  # stamp, effort, wall time
         self._fb_latest: tuple[int, np.ndarray, float] | None = None
+        # Real time: nominal torques for samples not reached yet (the feedforward's lookahead),
+        # by stamp; each becomes _ff_latest when its sample comes.
+        self._ff_ahead: dict[int, tuple[int, np.ndarray, float]] = {}
+        self._newest: dict[str, int] = {}  # newest stamp taken per topic
         self._applied: np.ndarray | None = None
         self._sent_wall = 0.0
         self._first_sent_wall = 0.0
@@ -284,25 +288,27 @@ class PlantNode(Node):
         """File a torque by its stamp.
 
         Rejected (counted in ``rejected.<topic>``): a stamp that is negative, off the sample
-        grid, ahead of the current sample, or any torque before the plant sent sample 0 -- no
-        controller can have computed it. Ignored and counted: older than the newest torque
-        held (``out_of_order.<topic>``); in lockstep, an answer to a sample already integrated
-        (``stale.<topic>``, e.g. to a resend) and a second torque for the current sample
-        (``duplicate.<topic>``: the first stands, nothing is applied twice).
+        grid, ahead of the current sample (a nominal torque: more than
+        :data:`~apc_msgs_py.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
+        sent sample 0 -- no controller can have computed it. Ignored and counted: older than the
+        newest torque taken (``out_of_order.<topic>``); in lockstep, an answer to a sample
+        already integrated (``stale.<topic>``, e.g. to a resend) and a second torque for a
+        sample (``duplicate.<topic>``: the first stands, nothing is applied twice).
         """
         stamp = torque.stamp_ns
         current = self.k * self.period_ns
+        ahead = wire.MAX_LOOKAHEAD * self.period_ns if topic == wire.FEEDFORWARD_TORQUE else 0
         try:
             sample_index(stamp, self.period_ns)
-            if stamp > current or not self.started:
+            if stamp > current + ahead or not self.started:
                 raise wire.WireError(
                     f"header.stamp: {stamp} ns is not a sample the plant sent (at {current} ns)"
                 )
         except wire.WireError as exc:
             reject(self, self.diagnostics, topic, exc)
             return
-        latest = getattr(self, latest_attr)
-        if latest is not None and stamp < latest[0]:
+        newest = self._newest.get(topic)
+        if newest is not None and stamp < newest:
             self.diagnostics.count(f"out_of_order.{topic}")
             return
         if self.mode == "lockstep" and stamp < current:
@@ -311,12 +317,29 @@ class PlantNode(Node):
         if self.mode == "lockstep" and stamp in pending:
             self.diagnostics.count(f"duplicate.{topic}")
             return
-        if stamp == current and self.started:
-            self.diagnostics.time(f"latency.{topic}", time.monotonic() - self._first_sent_wall)
-        setattr(self, latest_attr, (stamp, torque.effort, time.monotonic()))
+        self._newest[topic] = stamp
+        now = time.monotonic()
+        if stamp == current:
+            self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
         if self.mode == "lockstep":
             pending[stamp] = torque.effort
             self._lockstep_try()
+        elif stamp > current:
+            self._ff_ahead[stamp] = (stamp, torque.effort, now)
+        else:
+            setattr(self, latest_attr, (stamp, torque.effort, now))
+
+    def _promote_ahead(self) -> None:
+        """Real time: the newest nominal torque sent ahead whose sample has come is the latest."""
+        current = self.k * self.period_ns
+        due = [stamp for stamp in self._ff_ahead if stamp <= current]
+        if not due:
+            return
+        newest = max(due)
+        if self._ff_latest is None or newest > self._ff_latest[0]:
+            self._ff_latest = self._ff_ahead[newest]
+        for stamp in due:
+            del self._ff_ahead[stamp]
 
     # -- lockstep -------------------------------------------------------------------------------
     def _ready(self) -> bool:
@@ -432,6 +455,7 @@ class PlantNode(Node):
                 self.get_logger().info("real time: controllers connected, starting")
                 self._publish_state()
             return
+        self._promote_ahead()
         if self.k == 0 and (self._ff_latest is None or self._fb_latest is None):
             # Sample 0 is out; the clock starts once both controllers have answered it, so that
             # start-up (first callbacks, discovery of the return path) is not counted as late.
