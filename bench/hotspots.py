@@ -2,7 +2,7 @@
 
 - ``feedback_update_n3``: ``AdaptiveFeedback.update`` on the 3-joint PUMA, 3000 samples;
 - ``plant_step_n3``: ``Plant.step`` (one period, 4 RK4 steps), 1000 periods;
-- ``lockstep_one_process_recorder_on``: the four nodes on one SingleThreadedExecutor in a
+- ``lockstep_one_process_recorder_on``: the four nodes on one EventsExecutor in a
   ``bench/node_proc.py`` process, lockstep, 1000 samples;
 - ``lockstep_three_processes``: plant, feedforward and feedback processes, lockstep, 1000
   samples, each process profiled.
@@ -86,8 +86,8 @@ def profile_compute(samples: int) -> dict[str, Any]:
 def profile_ros(workdir: Path, samples: int) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for label, layout in (
-        ("lockstep_one_process_recorder_on", Layout("one", "single", True)),
-        ("lockstep_three_processes", Layout("three", "single", False)),
+        ("lockstep_one_process_recorder_on", Layout("one", recorder=True)),
+        ("lockstep_three_processes", Layout("three")),
     ):
         params = node_parameters("lockstep", 0.010, samples, layout.recorder)
         arm = ArmRun(workdir, f"prof_{label}", params, layout, profile=True)

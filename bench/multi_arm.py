@@ -4,11 +4,11 @@ Each arm is the paper's (3-joint PUMA 560, case c, adaptive law) at 100 Hz in mo
 ``realtime``, its plant running until stopped. Two layouts:
 
 - ``three_processes_per_arm``: plant, feedforward and feedback each in its own process
-  (3N processes), SingleThreadedExecutor, as ``ros2 run`` would start them;
-- ``one_process_per_arm``: the three nodes of an arm on one SingleThreadedExecutor in one
-  process (N processes);
-- ``one_process_per_arm_events_executor``: the same with ``rclpy.experimental.EventsExecutor``
-  (evidence for the recommendations; not what the executables use today).
+  (3N processes), EventsExecutor, as ``ros2 run`` starts them;
+- ``one_process_per_arm``: the three nodes of an arm on one EventsExecutor in one process
+  (N processes);
+- ``three_processes_per_arm_single_threaded_executor``: as the first with
+  ``SingleThreadedExecutor`` (what the executables used before; evidence for the change).
 
 All arms are started, the bench waits until every plant's clock runs, lets them run for
 ``--seconds`` more, and stops them. Per arm, over the window from 0.5 s after the last arm
@@ -36,9 +36,9 @@ from ros_loop import ArmRun, Layout, late_summary, node_parameters, realtime_sam
 
 ARMS = (1, 2, 5, 10)
 LAYOUTS = {
-    "three_processes_per_arm": Layout("three", "single", False),
-    "one_process_per_arm": Layout("one", "single", False),
-    "one_process_per_arm_events_executor": Layout("one", "events", False),
+    "three_processes_per_arm": Layout("three"),
+    "one_process_per_arm": Layout("one"),
+    "three_processes_per_arm_single_threaded_executor": Layout("three", "single"),
 }
 
 

@@ -3,15 +3,16 @@
 Started by ``bench/ros_loop.py`` and ``bench/multi_arm.py``; not meant to be run by hand.
 
     node_proc.py --role {plant,feedforward,feedback,arm,recorder} --params FILE.json
-                 [--ns /arm0] [--executor {single,events}] [--recorder-out X.mcap]
+                 [--ns /arm0] [--executor {events,single}] [--recorder-out X.mcap]
                  [--out RESULT.json] [--started FILE] [--profile PROF.json]
-                 [--no-param-services] [--aba]
+                 [--no-param-services]
 
 ``--params`` is a JSON file ``{node_name: {parameter: value}}`` (``RunSpec.node_parameters()``).
 ``arm`` puts feedforward, feedback and plant (and, with ``--recorder-out``, a recorder) on one
 executor in this process; the other roles run one node. The spin loop is ``run_node``'s
-(``spin_once(timeout_sec=0.1)`` until the plant is done or a signal arrives), so a
-SingleThreadedExecutor process here behaves like the shipped executables.
+(``spin_once(timeout_sec=0.1)`` until the plant is done or a signal arrives) on
+``nodeutil.make_executor`` (EventsExecutor by default), so a process here behaves like the
+shipped executables.
 
 The plant is measured only through public attributes, without touching ``src/``: its
 ``js_pub.publish`` is wrapped to note when each ``joint_states(k)`` first leaves, and the
@@ -20,7 +21,7 @@ plant (the callback's start, which is when the single-threaded plant can use the
 the process writes those times (``time.monotonic()``, one clock for every process on the
 machine) and the plant's ``diagnostics.counters`` to ``--out``. ``--started`` is written once
 the plant has completed sample 0 (k >= 1). ``--profile`` runs the spin loop under cProfile.
-``--no-param-services`` and ``--aba`` are what-ifs for the recommendations (see ``--help``).
+``--no-param-services`` is a what-if (see ``--help``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
 
@@ -122,31 +123,6 @@ def write_profile(profiler: Any, path: Path, samples: int, top: int = 25) -> Non
     )
 
 
-def use_aba(plant: Any) -> None:
-    """Make ``Plant.step`` use ABA: ``q'' = aba(q, q', tau)``, equal to CRBA + NLE + solve.
-
-    Only the instance attribute ``acceleration`` changes (``Plant.step`` calls it); the copy
-    matters, ABA returns a view of its data that the next call overwrites.
-    """
-    import pinocchio as pin
-
-    model = plant.robot.model
-    data = model.createData()
-
-    def acceleration(q: Any, qd: Any, tau: Any) -> Any:
-        return pin.aba(model, data, q, qd, tau).copy()
-
-    plant.acceleration = acceleration
-
-
-def make_executor(kind: str, context: Any) -> Any:
-    if kind == "events":
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor(context=context)
-    return SingleThreadedExecutor(context=context)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -154,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--params", required=True)
     parser.add_argument("--ns", default="")
-    parser.add_argument("--executor", choices=("single", "events"), default="single")
+    parser.add_argument("--executor", choices=("single", "events"), default="events")
     parser.add_argument("--recorder-out")
     parser.add_argument("--out")
     parser.add_argument("--started")
@@ -163,17 +139,12 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="Node(start_parameter_services=False): six fewer services per node to wait on",
     )
-    parser.add_argument(
-        "--aba",
-        action="store_true",
-        help="plant: integrate with Pinocchio's ABA instead of CRBA + NLE + solve (same q'')",
-    )
     parser.add_argument("--profile", help="cProfile the spin loop; top entries as JSON here")
     args = parser.parse_args(argv)
 
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
-    from apc_msgs_py.nodeutil import destroy_nodes
+    from apc_msgs_py.nodeutil import destroy_nodes, make_executor
     from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
@@ -208,8 +179,6 @@ def main(argv: list[str] | None = None) -> int:
         if args.role in ("plant", "arm"):
             plant = PlantNode(parameter_overrides=overrides("plant_node"), **ns)
             probe = PlantProbe(plant)  # before add_node: executors may cache callbacks
-            if args.aba:
-                use_aba(plant.plant)
             nodes.append(plant)
         executor = make_executor(args.executor, context)
         for node in nodes:

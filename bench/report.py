@@ -89,7 +89,7 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     for variant in (
         "three_processes_per_arm",
         "one_process_per_arm",
-        "one_process_per_arm_events_executor",
+        "three_processes_per_arm_single_threaded_executor",
     ):
         ma = _get(d, "multi_arm", variant, "10")
         if ma:

@@ -13,10 +13,10 @@ nodes run in ``bench/node_proc.py`` processes on a random ``ROS_DOMAIN_ID``, loc
   plant to the later of the two torques stamped kT reaching it. A sample is late when either
   torque reaches the plant after it has stepped to k+1 (what the plant's ``late_samples``
   counter counts; both are reported). The first 0.2 s after the clock starts are skipped.
-- variants, as evidence for the recommendations (not what the executables do today):
-  ``rclpy.experimental.EventsExecutor`` in every process, the nodes in one process,
-  ``Node(start_parameter_services=False)``, and the plant integrating with Pinocchio's ABA
-  (``bench/node_proc.py --aba``; same accelerations as CRBA + NLE + solve).
+- every process spins ``rclpy.experimental.EventsExecutor``, as the executables do; variants,
+  as evidence for the choices made: ``SingleThreadedExecutor``, the feedforward without its
+  lookahead (``lookahead: 0``, set point k answers joint state k), the nodes in one process,
+  and ``Node(start_parameter_services=False)``.
 
     .venv/bin/python bench/ros_loop.py [--quick] [--no-write] [--skip-variants]
 """
@@ -48,10 +48,10 @@ class Layout:
     """How the nodes of one arm are spread over processes."""
 
     processes: str = "three"  # "three" (ff, fb, plant) or "one" (all on one executor)
-    executor: str = "single"  # "single" (SingleThreadedExecutor) or "events"
+    executor: str = "events"  # "events" (EventsExecutor, as shipped) or "single"
     recorder: bool = False
     param_services: bool = True  # False: Node(start_parameter_services=False) everywhere
-    aba: bool = False  # True: the plant integrates with ABA (bench/node_proc.py --aba)
+    lookahead: int = 1  # the feedforward's lookahead parameter (0: serial ff -> fb)
 
 
 def node_parameters(
@@ -60,6 +60,7 @@ def node_parameters(
     n_samples: int,
     recorder: bool,
     publish_clock: bool = True,
+    lookahead: int = 1,
 ) -> dict[str, dict[str, Any]]:
     """Parameters of the three nodes: the paper's case (c), adaptive law, at ``period``."""
     from apc_plant_sim.experiment import RunSpec
@@ -71,6 +72,7 @@ def node_parameters(
     params["plant_node"]["n_samples"] = int(n_samples)
     params["plant_node"]["wait_for_subscribers"] = 3 if recorder else 2
     params["plant_node"]["publish_clock"] = publish_clock
+    params["feedforward_node"]["lookahead"] = int(lookahead)
     return params
 
 
@@ -118,8 +120,6 @@ class ArmRun:
             cmd += ["--profile", str(self.profile_path(role))]
         if not self.layout.param_services:
             cmd += ["--no-param-services"]
-        if self.layout.aba and role in ("plant", "arm"):
-            cmd += ["--aba"]
         log = open(self.workdir / f"{self.tag}.{role}.log", "w")
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy())
         log.close()
@@ -332,18 +332,20 @@ def lockstep(workdir: Path, quick: bool) -> dict[str, Any]:
     n_samples = 600 if quick else 1200
     runs = 1 if quick else 3
     layouts = {
-        ("one_process", "recorder_on"): Layout("one", "single", True),
-        ("one_process", "recorder_off"): Layout("one", "single", False),
-        ("three_processes", "recorder_on"): Layout("three", "single", True),
-        ("three_processes", "recorder_off"): Layout("three", "single", False),
-        ("one_process", "recorder_on_events_executor"): Layout("one", "events", True),
+        ("one_process", "recorder_on"): Layout("one", recorder=True),
+        ("one_process", "recorder_off"): Layout("one"),
+        ("three_processes", "recorder_on"): Layout("three", recorder=True),
+        ("three_processes", "recorder_off"): Layout("three"),
+        ("one_process", "recorder_on_single_threaded_executor"): Layout("one", "single", True),
         ("one_process", "recorder_on_no_parameter_services"): Layout(
-            "one", "single", True, param_services=False
+            "one", recorder=True, param_services=False
         ),
-        ("one_process", "recorder_on_events_executor_aba_plant"): Layout(
-            "one", "events", True, aba=True
+        ("three_processes", "recorder_on_single_threaded_executor"): Layout(
+            "three", "single", True
         ),
-        ("three_processes", "recorder_off_events_executor"): Layout("three", "events", False),
+        ("three_processes", "recorder_on_no_lookahead"): Layout(
+            "three", recorder=True, lookahead=0
+        ),
     }
     out: dict[str, Any] = {"one_process": {}, "three_processes": {}}
     for (where, variant), layout in layouts.items():
@@ -351,7 +353,9 @@ def lockstep(workdir: Path, quick: bool) -> dict[str, Any]:
         overall = []
         cpu: dict[str, Any] = {}
         for i in range(runs):
-            params = node_parameters("lockstep", 0.010, n_samples, layout.recorder)
+            params = node_parameters(
+                "lockstep", 0.010, n_samples, layout.recorder, lookahead=layout.lookahead
+            )
             arm = ArmRun(workdir, f"lockstep_{where}_{variant}_{i}", params, layout)
             run_arms([arm], timeout_s=120)
             probe = arm.result()
@@ -374,8 +378,9 @@ def lockstep(workdir: Path, quick: bool) -> dict[str, Any]:
         "arm": "PUMA 560 3 joints, paper case c, adaptive (node defaults), T = 10 ms",
         "repetition": "window of 100 consecutive samples (first 20 skipped)",
         "runs_per_variant": runs,
-        "executor": "SingleThreadedExecutor unless the variant says events_executor "
-        "(rclpy.experimental.EventsExecutor, spin_once)",
+        "executor": "rclpy.experimental.EventsExecutor (spin_once) unless the variant says "
+        "single_threaded_executor",
+        "lookahead": "feedforward one sample ahead unless the variant says no_lookahead",
     }
     return out
 
@@ -385,7 +390,9 @@ def realtime_once(
 ) -> dict[str, Any]:
     period = 1.0 / hz
     n_samples = round((seconds + warmup_s) / period) + 1
-    params = node_parameters("realtime", period, n_samples, recorder=False)
+    params = node_parameters(
+        "realtime", period, n_samples, recorder=False, lookahead=layout.lookahead
+    )
     arm = ArmRun(workdir, tag, params, layout)
     run_arms([arm], timeout_s=60 + 3 * seconds)
     probe = arm.result()
@@ -440,15 +447,14 @@ def realtime(
         return late, latency
 
     for hz in rates:
-        late, latency = measure(hz, Layout("three", "single", False), "three_processes")
+        late, latency = measure(hz, Layout("three"), "three_processes")
         late_out[str(hz)] = late
         lat_out[str(hz)] = latency
     if variants:
         for label, layout in (
-            ("three_processes_events_executor", Layout("three", "events", False)),
-            ("one_process_single_threaded", Layout("one", "single", False)),
-            ("one_process_events_executor", Layout("one", "events", False)),
-            ("one_process_events_executor_aba_plant", Layout("one", "events", False, aba=True)),
+            ("three_processes_single_threaded_executor", Layout("three", "single")),
+            ("three_processes_no_lookahead", Layout("three", lookahead=0)),
+            ("one_process", Layout("one")),
         ):
             late, latency = measure(1000, layout, label)
             extra[f"1000 Hz, {label.replace('_', ' ')}"] = {
@@ -460,7 +466,8 @@ def realtime(
         "realtime_latency_us": lat_out,
         "realtime_settings": {
             "arm": "PUMA 560 3 joints, paper case c, adaptive (node defaults)",
-            "layout": "three processes (plant, feedforward, feedback), SingleThreadedExecutor",
+            "layout": "three processes (plant, feedforward, feedback), EventsExecutor, "
+            "feedforward one sample ahead",
             "step": "period / 4 (4 RK4 substeps per period)",
             "warmup_s": 0.2,
             "latency": "joint_states(k) published -> later of the two torques stamped kT taken "
@@ -487,7 +494,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs, one of each")
     parser.add_argument("--no-write", action="store_true", help="print only")
-    parser.add_argument("--skip-variants", action="store_true", help="no EventsExecutor runs")
+    parser.add_argument("--skip-variants", action="store_true", help="no variant runs")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     benchlib.emit(run(args.quick, not args.skip_variants), "ros_loop", t0, write=not args.no_write)

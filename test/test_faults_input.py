@@ -1066,6 +1066,45 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert errors(plant) == 0
 
 
+def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(graph):
+    """Real time, the test playing both controllers: u_n(1), sent with u_n(0) (the
+    feedforward's lookahead), waits for sample 1; sample 0 applies u_n(0)."""
+    scenario = paper_scenario("a")
+    params = RunSpec(scenario, "none", mode="realtime").node_parameters()["plant_node"]
+    params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
+    ctx = graph.context
+    helper = graph.add(rclpy.create_node("controllers", context=ctx))
+    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
+    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
+    states: dict[int, Any] = {}
+    helper.create_subscription(
+        JointState,
+        wire.JOINT_STATES,
+        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
+        DEEP_QOS,
+    )
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
+    period_ns = 100_000_000
+    graph.spin_until(lambda: 0 in states, what="sample 0")
+
+    def torque(pub: Any, stamp_ns: int, effort: Any) -> None:
+        pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
+
+    a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
+    torque(ff_pub, 0, a)
+    torque(ff_pub, period_ns, b)  # ahead
+    torque(fb_pub, 0, np.zeros(N))
+    graph.spin_until(lambda: period_ns in states, what="sample 1")
+    effort = wire.joint_state_to_arrays(states[period_ns], NAMES, require=("effort",)).effort
+    np.testing.assert_array_equal(effort, a)
+    torque(fb_pub, period_ns, np.ones(N))
+    graph.spin_until(lambda: 2 * period_ns in states, what="sample 2")
+    effort = wire.joint_state_to_arrays(states[2 * period_ns], NAMES, require=("effort",)).effort
+    np.testing.assert_array_equal(effort, b + 1.0)
+    assert counter(plant, "rejected") == 0 and counter(plant, "watchdog_trips") == 0
+    assert errors(plant) == 0
+
+
 def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     """PD with absurd gains in a lockstep run: every applied torque in the recording is within
     the URDF's effort limits, and saturation is on the recorded /diagnostics."""
