@@ -87,6 +87,7 @@ __all__ = [
     "seconds_to_ns",
     "setpoint_to_msg",
     "stamp_to_ns",
+    "theta_to_estimate_msg",
     "topic_spec",
     "torque_to_msg",
 ]
@@ -972,17 +973,44 @@ def estimate_to_msg(
         raise WireError(f"G: shape {G.shape}, expected ({p}, m) with m > 0")
     if w.shape != (p,):
         raise WireError(f"w: shape {w.shape}, expected ({p},)")
+    for field, values in (("F", F), ("G", G), ("w", w)):
+        _check_finite(values, field, (), math.inf)
+    return theta_to_estimate_msg(
+        np.hstack([F, G, w[:, None]]), trace_p, residual_norm, stamp_ns=stamp_ns, msg=msg
+    )
+
+
+def theta_to_estimate_msg(
+    theta_t: Any,
+    trace_p: float,
+    residual_norm: float,
+    *,
+    stamp_ns: int,
+    msg: Float64MultiArray | None = None,
+) -> Float64MultiArray:
+    """:func:`estimate_to_msg` from ``Θᵀ = [F G w]`` in one (p, 3n+1) array, as the identifier
+    holds it (``Rls.model_view()``): no copies of F, G, w on the way.
+
+    Raises
+    ------
+    WireError
+        On a shape that is not (p, p + m + 1) with m > 0, non-finite values, or a stamp outside
+        ``[0, 2**53]`` ns.
+    """
+    theta = np.asarray(theta_t, dtype=np.float64)
+    if theta.ndim != 2 or theta.shape[0] == 0 or theta.shape[1] < theta.shape[0] + 2:
+        raise WireError(f"theta: shape {theta.shape}, expected (p, p + m + 1) with m > 0")
     if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, (int, np.integer)):
         raise WireError(f"stamp_ns: must be integer nanoseconds, got {type(stamp_ns).__name__}")
     if not 0 <= stamp_ns <= 2**53:
         raise WireError(f"stamp_ns: {stamp_ns} is outside [0, 2**53] (not exact as float64)")
-    theta = np.hstack([F, G, w[:, None]])
-    scalars = np.array([trace_p, residual_norm], dtype=np.float64)
-    for field, values in (("F", F), ("G", G), ("w", w)):
-        _check_finite(values, field, (), math.inf)
-    _check_finite(scalars[:1], "trace_p", (), math.inf)
-    _check_finite(scalars[1:], "residual_norm", (), math.inf)
     rows, cols = theta.shape
+    data = np.empty(rows * cols + 3)
+    data[: rows * cols] = theta.ravel()
+    data[rows * cols :] = (trace_p, residual_norm, float(stamp_ns))
+    _check_finite(data[: rows * cols], "theta", (), math.inf)
+    _check_finite(data[rows * cols : rows * cols + 1], "trace_p", (), math.inf)
+    _check_finite(data[rows * cols + 1 : rows * cols + 2], "residual_norm", (), math.inf)
     if msg is None:
         msg = Float64MultiArray()
     if len(msg.layout.dim) != 2:
@@ -991,7 +1019,6 @@ def estimate_to_msg(
     d0.label, d0.size, d0.stride = ESTIMATE_ROWS_LABEL, rows, rows * cols
     d1.label, d1.size, d1.stride = ESTIMATE_COLS_LABEL, cols, cols
     msg.layout.data_offset = 0
-    data = np.concatenate([theta.ravel(), scalars, [float(stamp_ns)]])
     msg.data = _to_double_array(data)
     return msg
 

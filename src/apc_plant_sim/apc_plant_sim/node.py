@@ -247,7 +247,8 @@ class PlantNode(Node):
 
     def _publish_state(self, resend: bool = False) -> None:
         stamp = self.k * self.period_ns
-        if self.clock_pub is not None:
+        # /clock only for a listener (use_sim_time nodes, a recorder): nobody else needs it.
+        if self.clock_pub is not None and self.clock_pub.get_subscription_count() > 0:
             self._clock_msg.clock = wire.ns_to_stamp(stamp, self._clock_msg.clock)
             self.clock_pub.publish(self._clock_msg)
         try:
