@@ -364,8 +364,8 @@ class FeedbackNode(Node):
         if rls is not None:
             # 0 before the first identification step: nothing non-finite goes on the wire.
             residual = float(np.linalg.norm(out.residual)) if out.residual is not None else 0.0
-            self.diagnostics.set("trace_p", f"{out.trace_p:.4g}")
-            self.diagnostics.set("residual_norm", f"{residual:.4g}")
+            self.diagnostics.set("trace_p", out.trace_p)
+            self.diagnostics.set("residual_norm", residual)
             if out.rejected:
                 self.diagnostics.count("rls_rejected_updates")
             # Built only for a listener (a recorder): a fifth of the node's work per sample.

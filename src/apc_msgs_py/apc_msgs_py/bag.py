@@ -817,7 +817,7 @@ class BagWriter:
             Unknown topic, data without a CDR encapsulation header, a time that is not a
             non-negative integer, or a finished writer.
         """
-        data = bytes(raw_cdr)
+        data = raw_cdr if type(raw_cdr) is bytes else bytes(raw_cdr)
         if len(data) < 4 or data[0] != 0 or data[1] > 0x0B:
             raise BagError(f"{topic}: data is not CDR (no encapsulation header): {data[:4]!r}")
         log_time = _check_time(log_time_ns, "log_time_ns")

@@ -400,18 +400,25 @@ def _name_permutation(
 
 
 _max_reduce = np.maximum.reduce
+_min_reduce = np.minimum.reduce
 
 
 def _check_finite(values: np.ndarray, field: str, labels: Sequence[str], max_abs: float) -> None:
     """Raise WireError if ``values`` holds NaN, Inf, or ``|v| > max_abs``; name the joint."""
-    # Fast path, two C calls (this runs ~25 times per sample): max |v| <= max_abs fails for a
-    # NaN (the maximum propagates it) and for an Inf; only then the entry-by-entry check.
-    if values.size:
-        largest = float(_max_reduce(np.abs(values.ravel())))
-        if largest <= max_abs and largest != math.inf:
+    # Fast path (this runs ~25 times per sample): the sum of the entries is finite only if none
+    # is NaN or Inf (x - x == 0 fails for both), then one bound on the largest |v|. For the short
+    # vectors of a joint state plain Python is 3x quicker than numpy's reductions. Only a
+    # failure (which includes a sum that merely overflows) gets the entry-by-entry check.
+    if values.size <= 32:
+        entries = values.ravel().tolist()
+        total = sum(entries)
+        if total - total == 0.0 and max(map(abs, entries), default=0.0) <= max_abs:
             return
     else:
-        return
+        flat = values.ravel()
+        low, high = _min_reduce(flat), _max_reduce(flat)
+        if -max_abs <= low and high <= max_abs and high != math.inf and low != -math.inf:
+            return
     finite = np.isfinite(values)
     if not finite.all():
         i = int(np.flatnonzero(~finite.ravel())[0])
