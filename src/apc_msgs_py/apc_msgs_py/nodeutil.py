@@ -296,6 +296,33 @@ def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
     raise ValueError(f"executor must be one of {EXECUTORS}, got {kind!r}")
 
 
+class WakeUp:
+    """A future completed every ``period_s`` of steady time, for ``spin_until_future_complete``.
+
+    Spinning many events per call saves a tenth of a lockstep sample against one
+    ``spin_once`` per event, but the events executor's own timeout only counts time spent
+    waiting: while events keep coming it would not return before the run ends, and a signal,
+    a progress bar or a stop condition would wait that long. A steady timer completing a fresh
+    future bounds each call; :meth:`fire` also ends it early (e.g. when a run finishes).
+    """
+
+    def __init__(self, node: Node, period_s: float) -> None:
+        self._future = Future()
+        self._timer = node.create_timer(
+            period_s, self.fire, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
+
+    def fire(self) -> None:
+        if not self._future.done():
+            self._future.set_result(None)
+
+    def next(self) -> Future:
+        """The future to spin on now (a fresh one once the last has completed)."""
+        if self._future.done():
+            self._future = Future()
+        return self._future
+
+
 def run_node(
     make_node: Callable[[], Node],
     *,
@@ -311,11 +338,34 @@ def run_node(
     node is built prints one line naming the parameter and returns 2. The node spins on
     :func:`make_executor` of ``$APC_EXECUTOR`` (``events`` unless set to ``single``).
     SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down.
-    ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``).
+    ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``)
+    with the node's ``exit_code``.
+    """
+    return run_nodes(
+        lambda: [make_node()],
+        prog=prog,
+        print_help=lambda: print_help(prog, summary, params),
+        args=args,
+        spin_until=None if spin_until is None else (lambda nodes: spin_until(nodes[0])),
+    )
+
+
+def run_nodes(
+    make_nodes: Callable[[], list[Node]],
+    *,
+    prog: str,
+    print_help: Callable[[], None],
+    args: Sequence[str] | None = None,
+    spin_until: Callable[[list[Node]], bool] | None = None,
+) -> int:
+    """:func:`run_node` for several nodes in one process on one executor (composition).
+
+    ``spin_until(nodes)`` returning True ends the run with the first node's ``exit_code``
+    that is not 0 (or 0).
     """
     argv = list(sys.argv[1:] if args is None else args)
     if {"-h", "--help"} & set(_user_args(argv)):
-        print_help(prog, summary, params)
+        print_help()
         return 0
     executor_kind = os.environ.get(EXECUTOR_ENV, "events") or "events"
     if executor_kind not in EXECUTORS:
@@ -334,11 +384,12 @@ def run_node(
     ):
         previous_sigint = signal.signal(signal.SIGINT, _leave_to_rclpy)
     rclpy.init(args=[prog, *argv])
-    node: Node | None = None
+    nodes: list[Node] = []
     code = 0
     try:
         try:
-            node = make_node()
+            for node in make_nodes():
+                nodes.append(node)
         except (ConfigError, RobotModelError, WireError, ValueError) as exc:
             print(f"{prog}: {exc}", file=sys.stderr)
             return 2
@@ -347,30 +398,31 @@ def run_node(
                 raise
             return 0  # stopped by a signal while the node was being built
         executor = make_executor(executor_kind)
-        executor.add_node(node)
-        node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
-        # Many events per call, no Python between them (a tenth of a lockstep sample's cost
-        # with one spin_once per event); the call returns after 0.1 s, or when a node that
-        # ends (the plant after n_samples) completes its ``finished`` future.
-        finished = getattr(node, "finished", None)
-        if not isinstance(finished, Future):
-            finished = Future()
+        for node in nodes:
+            executor.add_node(node)
+            node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
+        wake = WakeUp(nodes[0], 0.1)
+        for node in nodes:  # a node that ends (the plant after n_samples) ends the call at once
+            finished = getattr(node, "finished", None)
+            if isinstance(finished, Future):
+                finished.add_done_callback(lambda _: wake.fire())
         while rclpy.ok():
             try:
-                executor.spin_until_future_complete(finished, timeout_sec=0.1)
+                executor.spin_until_future_complete(wake.next(), timeout_sec=0.1)
             except Exception:
-                # A signal between ok() and spin_once() invalidates the context: that is a
+                # A signal between ok() and the spin invalidates the context: that is a
                 # shutdown, not an error. Anything else is re-raised.
                 if rclpy.ok():
                     raise
                 break
-            if spin_until is not None and spin_until(node):
-                code = getattr(node, "exit_code", 0)
+            if spin_until is not None and spin_until(nodes):
+                codes = [getattr(node, "exit_code", 0) for node in nodes]
+                code = next((c for c in codes if c), 0)
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        destroy_nodes([node] if node is not None else [])
+        destroy_nodes(nodes)
         if previous_sigint is not None:
             signal.signal(signal.SIGINT, previous_sigint)
     return code

@@ -27,13 +27,10 @@ from typing import Any
 import numpy as np
 import rclpy
 import yaml
-from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.task import Future
 
-from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
+from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, WakeUp, destroy_nodes, make_executor
 from apc_msgs_py.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
@@ -147,32 +144,6 @@ class Progress:
             sys.stderr.write("\n")
 
 
-class _WakeUp:
-    """A future completed every ``period_s`` of steady time, for ``spin_until_future_complete``.
-
-    The events executor's own timeout only counts time spent waiting: while events keep coming
-    (a lockstep run) it would not return before the run ends, and a signal, the progress bar
-    and the wall-clock limit would wait that long. A steady timer completing a fresh future
-    bounds each call.
-    """
-
-    def __init__(self, node: Node, period_s: float) -> None:
-        self._future = Future()
-        self._timer = node.create_timer(
-            period_s, self.fire, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
-
-    def fire(self) -> None:
-        if not self._future.done():
-            self._future.set_result(None)
-
-    def next(self) -> Future:
-        """The future to spin on now (a fresh one once the last has completed)."""
-        if self._future.done():
-            self._future = Future()
-        return self._future
-
-
 @dataclass
 class RunOutcome:
     path: Path
@@ -244,7 +215,7 @@ def run_in_process(
             nodes.append(plant)
             executor.add_node(plant)
             bar = Progress(plant.n_samples, spec.name, progress)
-            wake = _WakeUp(recorder, 0.05)
+            wake = WakeUp(recorder, 0.05)
             plant.finished.add_done_callback(lambda _: wake.fire())
             while not plant.done and time.monotonic() - t0 < timeout_s:
                 # Many events per call (one spin_once per event costs a tenth of a sample),

@@ -1,0 +1,142 @@
+"""``arm``: the nodes of one arm composed in one process (apc_plant_sim.arm).
+
+A lockstep run of the composed executable is the offline loop bit for bit (checked on every
+joint state and feedback torque an observer in this process receives), ``--controllers``
+composes only feedforward and feedback and runs against a ``plant_node`` process, and
+``--help`` lists each node's parameters.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from sensor_msgs.msg import JointState
+
+from apc_msgs_py import wire
+from apc_plant_sim.experiment import RunSpec
+from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+BIN = Path(sys.executable).parent
+NAMES = ["joint_1", "joint_2", "joint_3"]
+
+
+def _params_file(tmp_path: Path, spec: RunSpec, **plant: object) -> Path:
+    params = spec.node_parameters()
+    params["plant_node"].update(plant)
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}))
+    return path
+
+
+def _observe(graph, procs: list[subprocess.Popen]) -> tuple[dict[int, JointState], dict]:
+    """Joint states and feedback torques by stamp until the plant's process exits."""
+    states: dict[int, JointState] = {}
+    torques: dict[int, JointState] = {}
+    node = graph.add(rclpy.create_node("observer", context=graph.context))
+    for topic, into in ((wire.JOINT_STATES, states), (wire.FEEDBACK_TORQUE, torques)):
+        node.create_subscription(
+            JointState,
+            topic,
+            lambda m, into=into: into.setdefault(wire.stamp_to_ns(m.header.stamp), m),
+            wire.CONTROL_QOS,
+        )
+    deadline = time.monotonic() + 90
+    while procs[-1].poll() is None:
+        assert time.monotonic() < deadline, "the run did not end"
+        graph.spin_for(0.05)
+    graph.spin_for(0.3)
+    return states, torques
+
+
+def _check_against_offline(states, torques, scenario, settings) -> None:
+    offline = run_offline(scenario, "adaptive", settings)
+    n = len(offline.t)
+    assert len(states) >= n - 5 and len(torques) >= n - 5  # the first may precede discovery
+    for stamp, msg in states.items():
+        k = stamp // 10_000_000
+        sample = wire.joint_state_to_arrays(msg, NAMES)
+        np.testing.assert_array_equal(sample.position, offline.q[k], err_msg=f"q[{k}]")
+        np.testing.assert_array_equal(sample.velocity, offline.qd[k], err_msg=f"qd[{k}]")
+    for stamp, msg in torques.items():
+        k = stamp // 10_000_000
+        du = wire.msg_to_torque(msg, NAMES).effort
+        np.testing.assert_array_equal(du, offline.du[k], err_msg=f"du[{k}]")
+
+
+def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
+    scenario = paper_scenario("c", hold_s=0.2)
+    settings = paper_settings(1.5e5)
+    spec = RunSpec(scenario, "adaptive", settings, "lockstep")
+    params = _params_file(tmp_path, spec, wait_for_subscribers=3)  # ff, fb and the observer
+    with open(tmp_path / "arm.log", "wb") as log:
+        arm = subprocess.Popen(
+            [str(BIN / "arm"), "--ros-args", "--params-file", str(params)],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        states, torques = _observe(graph, [arm])
+        assert arm.returncode == 0, (tmp_path / "arm.log").read_text()[-2000:]
+        _check_against_offline(states, torques, scenario, settings)
+    finally:
+        if arm.poll() is None:
+            arm.kill()
+            arm.wait()
+
+
+def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
+    scenario = paper_scenario("c", hold_s=0.0)
+    settings = paper_settings(1.5e5)
+    spec = RunSpec(scenario, "adaptive", settings, "lockstep")
+    params = _params_file(tmp_path, spec, wait_for_subscribers=3)
+    cmd = ["--ros-args", "--params-file", str(params)]
+    procs: list[subprocess.Popen] = []
+    try:
+        with open(tmp_path / "controllers.log", "wb") as log:
+            procs.append(
+                subprocess.Popen(
+                    [str(BIN / "arm"), "--controllers", *cmd], stdout=log, stderr=subprocess.STDOUT
+                )
+            )
+        with open(tmp_path / "plant.log", "wb") as log:
+            procs.append(subprocess.Popen([str(BIN / "plant_node"), *cmd], stdout=log, stderr=log))
+        states, torques = _observe(graph, procs)
+        assert procs[1].returncode == 0, (tmp_path / "plant.log").read_text()[-2000:]
+        assert procs[0].poll() is None  # the controllers run until stopped
+        _check_against_offline(states, torques, scenario, settings)
+        log_text = (tmp_path / "controllers.log").read_text()
+        assert "feedforward_node" in log_text and "feedback_node" in log_text
+        assert "plant_node" not in log_text
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.send_signal(2)
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+    assert procs[0].returncode == 0
+
+
+def test_help_lists_each_node_and_bad_arguments_exit_2() -> None:
+    out = subprocess.run([str(BIN / "arm"), "--help"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    for section in ("--- plant_node ---", "--- feedforward_node ---", "--- feedback_node ---"):
+        assert section in out.stdout
+    assert "adaptive.q_position" in out.stdout and "lookahead" in out.stdout
+    out = subprocess.run(
+        [str(BIN / "arm"), "--controllers", "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert "--- plant_node ---" not in out.stdout
+    out = subprocess.run([str(BIN / "arm"), "--fast"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "--fast" in out.stderr
