@@ -190,11 +190,7 @@ def main(argv: list[str] | None = None) -> int:
             profiler.enable()
         while rclpy.ok():
             try:
-                if plant is not None and started_written:
-                    # Many events per call, none of this loop's Python between them.
-                    executor.spin_until_future_complete(plant.finished, timeout_sec=0.1)
-                else:
-                    executor.spin_once(timeout_sec=0.1)
+                executor.spin_once(timeout_sec=0.1)
             except Exception:
                 if rclpy.ok():
                     raise

@@ -1,7 +1,8 @@
 """``arm``: the nodes of one arm composed in one process (apc_plant_sim.arm).
 
 A lockstep run of the composed executable is the offline loop bit for bit (checked on every
-joint state and feedback torque an observer in this process receives), ``--controllers``
+joint state an observer in this process receives: position, velocity, and the applied torque
+u_n + du of the period before), ``--controllers``
 composes only feedforward and feedback and runs against a ``plant_node`` process, and
 ``--help`` lists each node's parameters.
 """
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from apc_msgs_py import wire
@@ -37,39 +39,36 @@ def _params_file(tmp_path: Path, spec: RunSpec, **plant: object) -> Path:
     return path
 
 
-def _observe(graph, procs: list[subprocess.Popen]) -> tuple[dict[int, JointState], dict]:
-    """Joint states and feedback torques by stamp until the plant's process exits."""
+def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
+    """Joint states by stamp until the plant's process (the last of ``procs``) exits."""
     states: dict[int, JointState] = {}
-    torques: dict[int, JointState] = {}
     node = graph.add(rclpy.create_node("observer", context=graph.context))
-    for topic, into in ((wire.JOINT_STATES, states), (wire.FEEDBACK_TORQUE, torques)):
-        node.create_subscription(
-            JointState,
-            topic,
-            lambda m, into=into: into.setdefault(wire.stamp_to_ns(m.header.stamp), m),
-            wire.CONTROL_QOS,
-        )
+    node.create_subscription(
+        JointState,
+        wire.JOINT_STATES,
+        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
+        # Deep: the run outpaces this test's executor, and keep-last 10 would drop samples.
+        QoSProfile(depth=10_000, reliability=ReliabilityPolicy.RELIABLE),
+    )
     deadline = time.monotonic() + 90
     while procs[-1].poll() is None:
         assert time.monotonic() < deadline, "the run did not end"
         graph.spin_for(0.05)
     graph.spin_for(0.3)
-    return states, torques
+    return states
 
 
-def _check_against_offline(states, torques, scenario, settings) -> None:
+def _check_against_offline(states, scenario, settings) -> None:
     offline = run_offline(scenario, "adaptive", settings)
-    n = len(offline.t)
-    assert len(states) >= n - 5 and len(torques) >= n - 5  # the first may precede discovery
+    # The plant starts once the observer subscribes: it sees every sample.
+    assert sorted(states) == [k * 10_000_000 for k in range(len(offline.t))]
     for stamp, msg in states.items():
         k = stamp // 10_000_000
         sample = wire.joint_state_to_arrays(msg, NAMES)
         np.testing.assert_array_equal(sample.position, offline.q[k], err_msg=f"q[{k}]")
         np.testing.assert_array_equal(sample.velocity, offline.qd[k], err_msg=f"qd[{k}]")
-    for stamp, msg in torques.items():
-        k = stamp // 10_000_000
-        du = wire.msg_to_torque(msg, NAMES).effort
-        np.testing.assert_array_equal(du, offline.du[k], err_msg=f"du[{k}]")
+        if k:  # u_n + du applied over the period before: the feedback's torques, bit for bit
+            np.testing.assert_array_equal(sample.effort, offline.applied[k - 1], err_msg=f"{k}")
 
 
 def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
@@ -84,9 +83,9 @@ def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
             stderr=subprocess.STDOUT,
         )
     try:
-        states, torques = _observe(graph, [arm])
+        states = _observe(graph, [arm])
         assert arm.returncode == 0, (tmp_path / "arm.log").read_text()[-2000:]
-        _check_against_offline(states, torques, scenario, settings)
+        _check_against_offline(states, scenario, settings)
     finally:
         if arm.poll() is None:
             arm.kill()
@@ -109,10 +108,10 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
             )
         with open(tmp_path / "plant.log", "wb") as log:
             procs.append(subprocess.Popen([str(BIN / "plant_node"), *cmd], stdout=log, stderr=log))
-        states, torques = _observe(graph, procs)
+        states = _observe(graph, procs)
         assert procs[1].returncode == 0, (tmp_path / "plant.log").read_text()[-2000:]
         assert procs[0].poll() is None  # the controllers run until stopped
-        _check_against_offline(states, torques, scenario, settings)
+        _check_against_offline(states, scenario, settings)
         log_text = (tmp_path / "controllers.log").read_text()
         assert "feedforward_node" in log_text and "feedback_node" in log_text
         assert "plant_node" not in log_text

@@ -30,7 +30,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.task import Future
 
 from apc_msgs_py.params import ConfigError, Param
 from apc_msgs_py.robot import PAPER_GRAVITY_M_S2, Robot, RobotModelError, load_robot
@@ -296,33 +295,6 @@ def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
     raise ValueError(f"executor must be one of {EXECUTORS}, got {kind!r}")
 
 
-class WakeUp:
-    """A future completed every ``period_s`` of steady time, for ``spin_until_future_complete``.
-
-    Spinning many events per call saves a tenth of a lockstep sample against one
-    ``spin_once`` per event, but the events executor's own timeout only counts time spent
-    waiting: while events keep coming it would not return before the run ends, and a signal,
-    a progress bar or a stop condition would wait that long. A steady timer completing a fresh
-    future bounds each call; :meth:`fire` also ends it early (e.g. when a run finishes).
-    """
-
-    def __init__(self, node: Node, period_s: float) -> None:
-        self._future = Future()
-        self._timer = node.create_timer(
-            period_s, self.fire, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
-
-    def fire(self) -> None:
-        if not self._future.done():
-            self._future.set_result(None)
-
-    def next(self) -> Future:
-        """The future to spin on now (a fresh one once the last has completed)."""
-        if self._future.done():
-            self._future = Future()
-        return self._future
-
-
 def run_node(
     make_node: Callable[[], Node],
     *,
@@ -401,16 +373,14 @@ def run_nodes(
         for node in nodes:
             executor.add_node(node)
             node.get_logger().info(f"{prog} running (namespace '{node.get_namespace()}')")
-        wake = WakeUp(nodes[0], 0.1)
-        for node in nodes:  # a node that ends (the plant after n_samples) ends the call at once
-            finished = getattr(node, "finished", None)
-            if isinstance(finished, Future):
-                finished.add_done_callback(lambda _: wake.fire())
         while rclpy.ok():
             try:
-                executor.spin_until_future_complete(wake.next(), timeout_sec=0.1)
+                # One event per call: EventsExecutor.spin_until_future_complete, which would
+                # save the Python between events, was seen to stop dispatching (a real-time
+                # plant hung idle in it, 1 run in 2); spin() is broken in this build.
+                executor.spin_once(timeout_sec=0.1)
             except Exception:
-                # A signal between ok() and the spin invalidates the context: that is a
+                # A signal between ok() and spin_once() invalidates the context: that is a
                 # shutdown, not an error. Anything else is re-raised.
                 if rclpy.ok():
                     raise

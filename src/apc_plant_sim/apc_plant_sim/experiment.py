@@ -30,7 +30,7 @@ import yaml
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
-from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, WakeUp, destroy_nodes, make_executor
+from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
 from apc_msgs_py.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
@@ -215,12 +215,8 @@ def run_in_process(
             nodes.append(plant)
             executor.add_node(plant)
             bar = Progress(plant.n_samples, spec.name, progress)
-            wake = WakeUp(recorder, 0.05)
-            plant.finished.add_done_callback(lambda _: wake.fire())
             while not plant.done and time.monotonic() - t0 < timeout_s:
-                # Many events per call (one spin_once per event costs a tenth of a sample),
-                # back here every 0.05 s for signals, progress and the timeout.
-                executor.spin_until_future_complete(wake.next(), timeout_sec=0.05)
+                executor.spin_once(timeout_sec=0.05)
                 stop.check()
                 bar.update(plant.k)
             bar.close()

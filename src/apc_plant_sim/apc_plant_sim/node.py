@@ -38,7 +38,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
@@ -190,9 +189,6 @@ class PlantNode(Node):
         self.diagnostics.set("mode", self.mode)
         self.done = False
         self.exit_code = 0
-        #: Completed (with the exit code) when the run ends: lets a runner spin many events per
-        #: call (``spin_until_future_complete``) instead of one ``spin_once`` per event.
-        self.finished: Future = Future()
         self.started = False
         self._ff: dict[int, np.ndarray] = {}
         self._fb: dict[int, np.ndarray] = {}
@@ -414,8 +410,6 @@ class PlantNode(Node):
     def _finish(self) -> None:
         """End the run and report the final counters on ``/diagnostics`` at once."""
         self.done = True
-        if not self.finished.done():
-            self.finished.set_result(self.exit_code)
         self._diagnostics_pub.publish()
 
     def _lockstep_try(self) -> None:
