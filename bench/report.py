@@ -86,6 +86,21 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
                 _verdict(ok),
             )
         )
+    one = _get(d, "realtime_variants", "1000 Hz, one process")
+    if one:
+        late, lat = one.get("late_fraction") or {}, one.get("latency_us") or {}
+        p99 = lat.get("p99")
+        ok = late.get("pooled") is not None and late["pooled"] <= 0.01
+        ok = ok and p99 is not None and p99 < 1000
+        rows.append(
+            (
+                "real time 1 kHz, one process (`arm`)",
+                f"late {_pct(late.get('pooled'))}, latency p99 "
+                f"{p99 if p99 is not None else 'n/a'} us",
+                "<= 1 % late, p99 < 1000 us",
+                _verdict(ok),
+            )
+        )
     for variant in (
         "three_processes_per_arm",
         "one_process_per_arm",
