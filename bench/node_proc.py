@@ -161,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     nodes: list[Any] = []
     plant = None
     probe: PlantProbe | None = None
+    executor = None
     profiler = None
     started_written = False
     try:
@@ -216,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
             write_profile(profiler, Path(args.profile), max(counts))
         if probe is not None and args.out:
             Path(args.out).write_text(json.dumps(probe.dump()))
-        destroy_nodes(nodes)
+        destroy_nodes(nodes, executor=executor)
     return 0 if plant is None else plant.exit_code
 
 

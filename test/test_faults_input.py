@@ -960,6 +960,26 @@ def test_goal_too_fast_for_the_wire_is_dropped_and_the_last_set_point_held(graph
 # ----------------------------------------------------------------------------------------------
 # The plant: stamps of torques, duplicates, torque limits
 # ----------------------------------------------------------------------------------------------
+def _stand_in_controllers(graph: Any) -> tuple[Any, Any, dict[int, Any]]:
+    """Publishers of both torques, and the plant's joint states by stamp, for a test that plays
+    the controllers."""
+    helper = graph.add(rclpy.create_node("controllers", context=graph.context))
+    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
+    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
+    states: dict[int, Any] = {}
+    helper.create_subscription(
+        JointState,
+        wire.JOINT_STATES,
+        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
+        DEEP_QOS,
+    )
+    return ff_pub, fb_pub, states
+
+
+def _torque(pub: Any, stamp_ns: int, effort: Any) -> None:
+    pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
+
+
 def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(graph):
     """Lockstep plant, the test playing both controllers: a torque before sample 0 is sent, in
     the future (a nominal torque: beyond the feedforward's lookahead), off the grid or negative
@@ -974,27 +994,15 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     params = RunSpec(scenario, "none").node_parameters()["plant_node"]
     params.update(wait_for_subscribers=2, n_samples=0, resend_s=30.0, lockstep_timeout_s=30.0)
     ctx = graph.context
-    helper = graph.add(rclpy.create_node("controllers", context=ctx))
-    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
-    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
-    states: dict[int, Any] = {}
-    helper.create_subscription(
-        JointState,
-        wire.JOINT_STATES,
-        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
-        DEEP_QOS,
-    )
+    ff_pub, fb_pub, states = _stand_in_controllers(graph)
     plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
     graph.spin_until(
         lambda: ff_pub.get_subscription_count() >= 1 and fb_pub.get_subscription_count() >= 1
     )
 
-    def torque(pub: Any, stamp_ns: int, effort: Any) -> None:
-        pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
-
     ff_key, fb_key = f"rejected.{wire.FEEDFORWARD_TORQUE}", f"rejected.{wire.FEEDBACK_TORQUE}"
     # Before the plant sent sample 0 (it waits for a second listener): nobody computed this.
-    torque(ff_pub, 0, np.zeros(N))
+    _torque(ff_pub, 0, np.zeros(N))
     graph.spin_until(lambda: counter(plant, ff_key) == 1)
     assert not plant.started
     graph.add(rclpy.create_node("listener", context=ctx)).create_subscription(
@@ -1006,10 +1014,10 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     reference = Plant(built.plant_robot, built.plant_config, np.deg2rad(scenario.q_start_deg))
     a = np.array([5.0, 40.0, 10.0])
     # Sample 0: two different feedforward torques; the first stands, nothing is added.
-    torque(ff_pub, 0, a)
-    torque(ff_pub, 0, 3.0 * a)
+    _torque(ff_pub, 0, a)
+    _torque(ff_pub, 0, 3.0 * a)
     graph.spin_until(lambda: counter(plant, f"duplicate.{wire.FEEDFORWARD_TORQUE}") == 1)
-    torque(fb_pub, 0, np.zeros(N))
+    _torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: T_NS in states, what="sample 1")
     step = reference.step(a)
     got = wire.joint_state_to_arrays(
@@ -1021,30 +1029,30 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
 
     # Sample 1: too far ahead, off grid, negative -> rejected; answers to sample 0 -> stale.
     for stamp in ((wire.MAX_LOOKAHEAD + 2) * T_NS, T_NS + 5, -T_NS):
-        torque(ff_pub, stamp, a)
-    torque(ff_pub, 0, a)
-    torque(fb_pub, 2 * T_NS, np.zeros(N))  # a feedback torque is never ahead of the state
-    torque(fb_pub, 0, np.zeros(N))
+        _torque(ff_pub, stamp, a)
+    _torque(ff_pub, 0, a)
+    _torque(fb_pub, 2 * T_NS, np.zeros(N))  # a feedback torque is never ahead of the state
+    _torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDBACK_TORQUE}") == 1)
     graph.spin_until(lambda: counter(plant, ff_key) == 4)
     graph.spin_until(lambda: counter(plant, fb_key) == 1)
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDFORWARD_TORQUE}") == 1)
-    torque(ff_pub, T_NS, a)
-    torque(fb_pub, T_NS, np.zeros(N))
+    _torque(ff_pub, T_NS, a)
+    _torque(fb_pub, T_NS, np.zeros(N))
     graph.spin_until(lambda: 2 * T_NS in states, what="sample 2")
     reference.step(a)
 
     # Sample 2: an answer to sample 0 is out of order; the rejected future torque for sample 2
     # was not kept: with the nominal torque missing the plant does not step.
-    torque(ff_pub, 0, a)
-    torque(fb_pub, 2 * T_NS, np.zeros(N))
+    _torque(ff_pub, 0, a)
+    _torque(fb_pub, 2 * T_NS, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"out_of_order.{wire.FEEDFORWARD_TORQUE}") == 1)
     graph.spin_for(0.3)
     assert plant.k == 2
     # A huge but valid torque is clipped to the effort limits, and counted.
     huge = np.array([1e5, -1e5, 1e5])
-    torque(ff_pub, 2 * T_NS, huge)
-    torque(ff_pub, 3 * T_NS, a)  # one sample ahead, as the feedforward node sends it: kept
+    _torque(ff_pub, 2 * T_NS, huge)
+    _torque(ff_pub, 3 * T_NS, a)  # one sample ahead, as the feedforward node sends it: kept
     graph.spin_until(lambda: 3 * T_NS in states, what="sample 3")
     limit = built.plant_robot.effort_limit
     applied = wire.joint_state_to_arrays(states[3 * T_NS], NAMES).effort
@@ -1056,7 +1064,7 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert counter(plant, "saturated_samples") == 1
     assert all(counter(plant, f"saturated.{name}") == 1 for name in NAMES)
     # Sample 3 needs only its feedback torque now: the nominal one came ahead.
-    torque(fb_pub, 3 * T_NS, np.zeros(N))
+    _torque(fb_pub, 3 * T_NS, np.zeros(N))
     graph.spin_until(lambda: 4 * T_NS in states, what="sample 4")
     np.testing.assert_array_equal(
         wire.joint_state_to_arrays(states[4 * T_NS], NAMES).position, reference.step(a).q
@@ -1073,31 +1081,19 @@ def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(gr
     params = RunSpec(scenario, "none", mode="realtime").node_parameters()["plant_node"]
     params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
     ctx = graph.context
-    helper = graph.add(rclpy.create_node("controllers", context=ctx))
-    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
-    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
-    states: dict[int, Any] = {}
-    helper.create_subscription(
-        JointState,
-        wire.JOINT_STATES,
-        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
-        DEEP_QOS,
-    )
+    ff_pub, fb_pub, states = _stand_in_controllers(graph)
     plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
     period_ns = 100_000_000
     graph.spin_until(lambda: 0 in states, what="sample 0")
 
-    def torque(pub: Any, stamp_ns: int, effort: Any) -> None:
-        pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
-
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
-    torque(ff_pub, 0, a)
-    torque(ff_pub, period_ns, b)  # ahead
-    torque(fb_pub, 0, np.zeros(N))
+    _torque(ff_pub, 0, a)
+    _torque(ff_pub, period_ns, b)  # ahead
+    _torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: period_ns in states, what="sample 1")
     effort = wire.joint_state_to_arrays(states[period_ns], NAMES, require=("effort",)).effort
     np.testing.assert_array_equal(effort, a)
-    torque(fb_pub, period_ns, np.ones(N))
+    _torque(fb_pub, period_ns, np.ones(N))
     graph.spin_until(lambda: 2 * period_ns in states, what="sample 2")
     effort = wire.joint_state_to_arrays(states[2 * period_ns], NAMES, require=("effort",)).effort
     np.testing.assert_array_equal(effort, b + 1.0)

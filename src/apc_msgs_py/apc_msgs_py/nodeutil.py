@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import functools
 import os
 import signal
@@ -246,9 +248,20 @@ def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable)
     return wrapper
 
 
-def destroy_nodes(nodes: Iterable[Node], context: rclpy.Context | None = None) -> None:
-    """Tear down in reverse order of creation: ``close()`` what can be closed (a recorder's
-    file), destroy every node, then shut the context down (the default one if ``None``)."""
+def destroy_nodes(
+    nodes: Iterable[Node], context: rclpy.Context | None = None, executor: Any = None
+) -> None:
+    """Tear down in reverse order of creation: shut the executor down (if given), ``close()``
+    what can be closed (a recorder's file), destroy every node, then shut the context down (the
+    default one if ``None``).
+
+    The executor goes first: the events executor runs timers on a thread of its own, and
+    destroying a node whose timer that thread is serving races with it (a real-time plant was
+    once seen not to exit after SIGTERM).
+    """
+    if executor is not None:
+        with contextlib.suppress(Exception):  # after the context's shutdown it may refuse
+            executor.shutdown(timeout_sec=1.0)
     for node in reversed(list(nodes)):
         closer = getattr(node, "close", None)
         if callable(closer):
@@ -272,6 +285,8 @@ def _user_args(argv: Sequence[str]) -> list[str]:
     return args[: args.index("--ros-args")] if "--ros-args" in args else args
 
 
+#: Longest teardown of a node process before it is ended with its tracebacks (s).
+TEARDOWN_LIMIT_S = 5.0
 #: Executors a node process can spin (:func:`make_executor`).
 EXECUTORS = ("events", "single")
 #: Environment variable that picks the executor of ``ros2 run`` nodes (default ``events``).
@@ -357,6 +372,7 @@ def run_nodes(
         previous_sigint = signal.signal(signal.SIGINT, _leave_to_rclpy)
     rclpy.init(args=[prog, *argv])
     nodes: list[Node] = []
+    executor = None
     code = 0
     try:
         try:
@@ -392,7 +408,11 @@ def run_nodes(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        destroy_nodes(nodes)
+        # A teardown that hangs (rclpy's and DDS's threads) must not keep a stopped node alive:
+        # after 5 s the tracebacks of every thread go to stderr and the process exits with 1.
+        faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
+        destroy_nodes(nodes, executor=executor)
+        faulthandler.cancel_dump_traceback_later()
         if previous_sigint is not None:
             signal.signal(signal.SIGINT, previous_sigint)
     return code

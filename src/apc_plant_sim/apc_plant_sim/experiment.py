@@ -180,6 +180,7 @@ def run_in_process(
         rclpy.init(context=context)
         nodes = []
         plant = None
+        executor = None
         t0 = time.monotonic()
         try:
             sim_time = [Parameter("use_sim_time", value=True)]
@@ -240,7 +241,7 @@ def run_in_process(
         except TimeoutError as exc:
             return RunOutcome(path, False, str(exc), 0, _since(t0))
         finally:
-            destroy_nodes(nodes, context)
+            destroy_nodes(nodes, context, executor)
 
 
 def run_in_processes(
@@ -270,6 +271,7 @@ def run_in_processes(
         rclpy.init(context=context)
         procs: dict[str, subprocess.Popen] = {}
         recorder = None
+        executor = None
         t0 = time.monotonic()
 
         def samples() -> int:
@@ -348,7 +350,7 @@ def run_in_processes(
             return RunOutcome(path, False, str(exc), samples(), _since(t0))
         finally:
             stop_processes(procs.values())
-            destroy_nodes([recorder] if recorder is not None else [], context)
+            destroy_nodes([recorder] if recorder is not None else [], context, executor)
             Path(params_file).unlink(missing_ok=True)
 
 
