@@ -55,6 +55,8 @@ MODULES = {
 }
 T = 0.010
 WATCHDOG_S = 0.05
+#: The feedforward node's lookahead (its default): how many samples ahead its torques are.
+LOOKAHEAD = 1
 #: Allowance for a loaded 2-core machine (scheduling of four Python processes, DDS latency).
 SCHEDULING_MARGIN_S = 0.15
 
@@ -367,24 +369,27 @@ def test_realtime_controller_death_watchdog_and_restart(tmp_path, observer):
         )
         error = obs.diag_after(t_kill, DiagnosticStatus.ERROR)[0]
         assert "brake" in error[2] and int(error[3]["watchdog_trips"]) >= 1, error
-        # The watchdog counts the plant's own periods: the first braked sample comes
-        # watchdog_s / T + 1 or + 2 samples after the last one the feedforward saw (the kill
-        # falls somewhere in a period; the observer's last sample may lag by one).
+        # The watchdog counts the plant's own periods from the sample the last nominal torque
+        # is for: the first braked sample comes watchdog_s / T + 1 or + 2 samples after the last
+        # one the feedforward saw (the kill falls somewhere in a period; the observer's last
+        # sample may lag by one), plus the feedforward's lookahead (its last torque was for a
+        # sample ahead, and is applied at it).
         window = [s for s in obs.states if t_kill - 0.05 < s[0] <= first[0]]
         stall = max(np.diff([s[0] for s in window]), default=0.0)
         report(
             "watchdog (feedforward killed -> first braked joint_states seen)",
             reaction_s=reaction,
             samples=reaction_samples,
-            bound_s=WATCHDOG_S + 2 * T,
+            bound_s=WATCHDOG_S + (2 + LOOKAHEAD) * T,
             margin_s=SCHEDULING_MARGIN_S,
             longest_gap_between_states_s=stall,
         )
         timeline = [(round(s[0] - t_kill, 4), s[1] // 10_000_000, _braked(s)) for s in window]
-        assert round(WATCHDOG_S / T) <= reaction_samples <= round(WATCHDOG_S / T) + 3, timeline
+        low, high = round(WATCHDOG_S / T), round(WATCHDOG_S / T) + LOOKAHEAD + 3
+        assert low <= reaction_samples <= high, timeline
         assert reaction >= WATCHDOG_S - T, timeline
         if stall < SCHEDULING_MARGIN_S:
-            assert reaction <= WATCHDOG_S + 2 * T + SCHEDULING_MARGIN_S, timeline
+            assert reaction <= WATCHDOG_S + (2 + LOOKAHEAD) * T + SCHEDULING_MARGIN_S, timeline
         # else: joint states stopped arriving for longer than the margin (the machine stalled
         # the processes: seen once, 3 s, while other jobs loaded the 2 cores); the sample count
         # above is the watchdog's own measure.
@@ -399,8 +404,10 @@ def test_realtime_controller_death_watchdog_and_restart(tmp_path, observer):
             [kids.procs["plant_node"], kids.procs["feedback_node"]],
         )
         t_back = time.monotonic()
-        obs.spin_for(0.3)
-        moving = [s for s in obs.states if s[0] > t_back]
+        obs.spin_for(0.5)
+        # A process just started may stall past the watchdog once while it warms up (seen
+        # under full-suite load): the loop must be running, unbraked, from 0.2 s on.
+        moving = [s for s in obs.states if s[0] > t_back + 0.2]
         assert len(moving) >= 15 and not any(_braked(s) for s in moving)
         assert np.ptp([s[2] for s in moving], axis=0).max() > 0.0
         obs.spin_until(

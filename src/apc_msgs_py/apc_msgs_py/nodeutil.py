@@ -410,12 +410,23 @@ def run_nodes(
     finally:
         # A teardown that hangs (rclpy's and DDS's threads) must not keep a stopped node alive:
         # after 5 s the tracebacks of every thread go to stderr and the process exits with 1.
-        faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
+        # (Not where stderr has no file descriptor, e.g. main() called under pytest's capture.)
+        guarded_teardown = _arm_teardown_limit()
         destroy_nodes(nodes, executor=executor)
-        faulthandler.cancel_dump_traceback_later()
+        if guarded_teardown:
+            faulthandler.cancel_dump_traceback_later()
         if previous_sigint is not None:
             signal.signal(signal.SIGINT, previous_sigint)
     return code
+
+
+def _arm_teardown_limit() -> bool:
+    """Have faulthandler end the process after :data:`TEARDOWN_LIMIT_S`; False if it cannot."""
+    try:
+        faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True, file=sys.__stderr__)
+    except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is an OSError
+        return False
+    return True
 
 
 def _leave_to_rclpy(signum: int, frame: Any) -> None:
