@@ -255,14 +255,19 @@ def destroy_nodes(
     what can be closed (a recorder's file), destroy every node, then shut the context down (the
     default one if ``None``).
 
-    The executor goes first: the events executor runs timers on a thread of its own, and
-    destroying a node whose timer that thread is serving races with it (a real-time plant was
-    once seen not to exit after SIGTERM).
+    The executor lets go of the nodes first: the events executor keeps using a node's handle
+    (and serves timers from a thread of its own) while the node is added to it, and
+    ``destroy_node`` then waits for ever in ``destroy_when_not_in_use`` (caught in CI by the
+    teardown limit below: a feedforward_node stuck there after SIGTERM).
     """
+    nodes = list(nodes)
     if executor is not None:
-        with contextlib.suppress(Exception):  # after the context's shutdown it may refuse
+        for node in nodes:
+            with contextlib.suppress(Exception):  # after the context's shutdown it may refuse
+                executor.remove_node(node)
+        with contextlib.suppress(Exception):
             executor.shutdown(timeout_sec=1.0)
-    for node in reversed(list(nodes)):
+    for node in reversed(nodes):
         closer = getattr(node, "close", None)
         if callable(closer):
             closer()
@@ -289,7 +294,8 @@ def _user_args(argv: Sequence[str]) -> list[str]:
 TEARDOWN_LIMIT_S = 5.0
 #: Executors a node process can spin (:func:`make_executor`).
 EXECUTORS = ("events", "single")
-#: Environment variable that picks the executor of ``ros2 run`` nodes (default ``events``).
+#: Environment variable that picks the executor of ``ros2 run`` nodes (``single`` for one node,
+#: ``events`` for ``arm``, unless set).
 EXECUTOR_ENV = "APC_EXECUTOR"
 
 
@@ -323,7 +329,10 @@ def run_node(
 
     ``--help`` prints the parameters. A :class:`ConfigError` (or a model/wire error) while the
     node is built prints one line naming the parameter and returns 2. The node spins on
-    :func:`make_executor` of ``$APC_EXECUTOR`` (``events`` unless set to ``single``).
+    :func:`make_executor` of ``$APC_EXECUTOR``, ``single`` (``SingleThreadedExecutor``) unless
+    set to ``events``: a single node process stops on SIGINT/SIGTERM reliably with it, while
+    the events executor, 2x faster, was seen (1 run in ~10 of the signal tests) to hang in
+    ``destroy_node`` after a signal.
     SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down.
     ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``)
     with the node's ``exit_code``.
@@ -334,6 +343,7 @@ def run_node(
         print_help=lambda: print_help(prog, summary, params),
         args=args,
         spin_until=None if spin_until is None else (lambda nodes: spin_until(nodes[0])),
+        default_executor="single",
     )
 
 
@@ -344,17 +354,18 @@ def run_nodes(
     print_help: Callable[[], None],
     args: Sequence[str] | None = None,
     spin_until: Callable[[list[Node]], bool] | None = None,
+    default_executor: str = "events",
 ) -> int:
     """:func:`run_node` for several nodes in one process on one executor (composition).
 
     ``spin_until(nodes)`` returning True ends the run with the first node's ``exit_code``
-    that is not 0 (or 0).
+    that is not 0 (or 0). ``$APC_EXECUTOR`` overrides ``default_executor``.
     """
     argv = list(sys.argv[1:] if args is None else args)
     if {"-h", "--help"} & set(_user_args(argv)):
         print_help()
         return 0
-    executor_kind = os.environ.get(EXECUTOR_ENV, "events") or "events"
+    executor_kind = os.environ.get(EXECUTOR_ENV) or default_executor
     if executor_kind not in EXECUTORS:
         print(f"{prog}: {EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}", file=sys.stderr)
         return 2
