@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
-    from apc_msgs_py.nodeutil import destroy_nodes, make_executor
+    from apc_msgs_py.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
     from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
@@ -189,13 +189,7 @@ def main(argv: list[str] | None = None) -> int:
 
             profiler = cProfile.Profile()
             profiler.enable()
-        while rclpy.ok():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except Exception:
-                if rclpy.ok():
-                    raise
-                break
+        while spin_once_or_stop(executor):
             if plant is not None:
                 if not started_written and args.started and plant.k >= 1:
                     Path(args.started).write_text(f"{time.monotonic()}\n")

@@ -125,6 +125,11 @@ class Children:
         self.procs[key] = proc
         return proc
 
+    def start_controllers(self) -> None:
+        """The feedforward and feedback nodes (the plant is started once they are up)."""
+        self.start("feedforward_node")
+        self.start("feedback_node")
+
     def kill(self, key: str) -> float:
         """SIGKILL a node; return the monotonic time of the kill.
 
@@ -242,6 +247,12 @@ class Observer:
     def subscribers(self, topic: str) -> int:
         return self.node.count_subscribers(self.node.resolve_topic_name(topic))
 
+    def controllers_up(self) -> bool:
+        """Both controllers publish their torques (they are running and discovered)."""
+        return bool(
+            self.publishers(wire.FEEDFORWARD_TORQUE) and self.publishers(wire.FEEDBACK_TORQUE)
+        )
+
     # -- queries --------------------------------------------------------------------------------
     def k(self) -> int:
         return self.states[-1][1] // 10_000_000 if self.states else -1
@@ -296,15 +307,8 @@ def test_realtime_controller_death_watchdog_and_restart(tmp_path, observer):
     params_file = write_params(tmp_path / "params.yaml", realtime_params())
     kids = Children(tmp_path, params_file)
     try:
-        kids.start("feedforward_node")
-        kids.start("feedback_node")
-        obs.spin_until(
-            lambda: (
-                obs.publishers(wire.FEEDFORWARD_TORQUE) and obs.publishers(wire.FEEDBACK_TORQUE)
-            ),
-            30,
-            "controllers' publishers",
-        )
+        kids.start_controllers()
+        obs.spin_until(obs.controllers_up, 30, "controllers' publishers")
         kids.start("plant_node")
         procs = list(kids.procs.values())
         obs.spin_until(lambda: obs.k() >= 150, 30, "the move", procs)
@@ -438,15 +442,8 @@ def test_lockstep_three_processes_peer_killed_ends_with_error(tmp_path, observer
     params["plant_node"].update(lockstep_timeout_s=timeout_s, resend_s=0.2)
     kids = Children(tmp_path, write_params(tmp_path / "params.yaml", params))
     try:
-        kids.start("feedforward_node")
-        kids.start("feedback_node")
-        obs.spin_until(
-            lambda: (
-                obs.publishers(wire.FEEDFORWARD_TORQUE) and obs.publishers(wire.FEEDBACK_TORQUE)
-            ),
-            30,
-            "controllers' publishers",
-        )
+        kids.start_controllers()
+        obs.spin_until(obs.controllers_up, 30, "controllers' publishers")
         plant = kids.start("plant_node")
         obs.spin_until(lambda: obs.k() >= 20, 30, "lockstep samples", [plant])
         t_kill = kids.kill("feedback_node")
@@ -507,16 +504,11 @@ def test_every_node_stops_on_signal_within_2s(tmp_path, observer, sig):
     kids = Children(tmp_path, write_params(tmp_path / "params.yaml", params))
     try:
         kids.start("recorder", "-p", f"output:={bag}")
-        kids.start("feedforward_node")
-        kids.start("feedback_node")
+        kids.start_controllers()
         obs.spin_until(
-            lambda: (
-                obs.publishers(wire.FEEDFORWARD_TORQUE)
-                and obs.publishers(wire.FEEDBACK_TORQUE)
-                and obs.subscribers(wire.FEEDBACK_TORQUE) >= 1
-            ),  # the recorder
+            lambda: obs.controllers_up() and obs.subscribers(wire.FEEDBACK_TORQUE) >= 1,
             30,
-            "controllers and recorder",
+            "controllers and recorder",  # the recorder listening to the feedback
         )
         kids.start("plant_node")
         obs.spin_until(lambda: obs.k() >= 50, 30, "the run", list(kids.procs.values()))
@@ -611,16 +603,11 @@ def test_killed_recorder_keeps_an_exact_prefix_of_the_run(tmp_path):
     kids = Children(tmp_path, write_params(tmp_path / "params.yaml", params))
     try:
         kids.start("recorder", "-p", f"output:={bag}", "-p", f"max_chunk_interval_s:={interval_s}")
-        kids.start("feedforward_node")
-        kids.start("feedback_node")
+        kids.start_controllers()
         obs.spin_until(
-            lambda: (
-                obs.publishers(wire.FEEDFORWARD_TORQUE)
-                and obs.publishers(wire.FEEDBACK_TORQUE)
-                and obs.subscribers(wire.FEEDBACK_TORQUE) >= 2
-            ),  # the observer and the recorder
+            lambda: obs.controllers_up() and obs.subscribers(wire.FEEDBACK_TORQUE) >= 2,
             30,
-            "controllers and recorder",
+            "controllers and recorder",  # the observer and the recorder listening to the feedback
         )
         obs.spin_for(1.0)  # let the recorder match the controllers' writers
         kids.start("plant_node")

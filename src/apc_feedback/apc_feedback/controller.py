@@ -143,8 +143,6 @@ class AdaptiveConfig:
         possible models. Without it a sudden load (a payload picked up) lets one
         large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
         torque (19 deg on joint 3 in the pickup run). Off in the paper.
-        A sudden disturbance (a payload picked up) otherwise lets one large-residual step flip
-        the sign of ``Ĝ`` and the law commands full torque the wrong way. Off in the paper.
     """
 
     period: float = 0.010
