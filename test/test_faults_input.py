@@ -801,13 +801,23 @@ def test_feedback_keeps_the_first_of_two_states_with_one_stamp(graph):
     graph.spin_until(lambda: plant.count(wire.FEEDBACK_TORQUE, 0) == 1)
     du = wire.msg_to_torque(plant.got[wire.FEEDBACK_TORQUE][0][0], NAMES).effort
     np.testing.assert_array_equal(du, 100.0 * (q_d - (q_d - e)))  # Kp (q_d - q), first state
-    # A set point for a sample that is done: ignored; an older one: rejected.
+    # For a sample that is done, a copy of the set point used is a resend (the feedforward
+    # answering a re-sent joint state); a different one is a duplicate (the sample just done)
+    # or rejected (an older one).
     plant.joint_state(T_NS, q_d, np.zeros(N))
     plant.setpoint(T_NS, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
     graph.spin_until(lambda: plant.count(wire.FEEDBACK_TORQUE, T_NS) == 1)
     plant.setpoint(0, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: counter(fb, "resent.feedforward/setpoint") == 1)
+    plant.setpoint(T_NS, q_d, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: counter(fb, "resent.feedforward/setpoint") == 2)
+    plant.setpoint(T_NS, q_d + e, np.zeros(N), np.zeros(N), np.zeros(N))
+    graph.spin_until(lambda: counter(fb, "duplicate.feedforward/setpoint") == 1)
+    plant.setpoint(0, q_d + e, np.zeros(N), np.zeros(N), np.zeros(N))
     graph.spin_until(lambda: counter(fb, "rejected.feedforward/setpoint") == 1)
+    assert counter(fb, "resent.feedforward/setpoint") == 2
     assert errors(fb) == 0
+    assert plant.count(wire.FEEDBACK_TORQUE, T_NS) == 1
 
 
 def extreme_goal() -> st.SearchStrategy[JointTrajectory]:

@@ -4,7 +4,9 @@ For each sample ``k`` it waits until it holds both ``joint_states`` and ``feedfo
 stamped ``kT`` (in either order), runs its feedback law once, and publishes ``du(k)`` on
 ``feedback/torque`` (stamped ``kT``) and, for the adaptive law, the identified ``[F̂ Ĝ ŵ]``,
 trace(P) and residual norm on ``feedback/estimate``. A re-sent sample (lockstep resend) is
-answered from a cache, so the identifier never sees a sample twice.
+answered from a cache, so the identifier never sees a sample twice; the copy of a used set point
+that the feedforward sends again then (samples later, with its lookahead) is counted as
+``resent.feedforward/setpoint``, not rejected.
 
 Controller kinds: ``adaptive`` (the paper's), ``computed_torque`` (Eq. 36), ``pd``, ``none``.
 
@@ -158,6 +160,25 @@ RUNTIME_PARAMS: dict[str, Param] = {p.name: p for p in PARAMS if not p.read_only
 RUNTIME_FAMILY = {"adaptive": "adaptive.", "computed_torque": "gains.", "pd": "gains."}
 #: Samples waiting for their other half; beyond this the oldest is dropped (bounded memory).
 MAX_PENDING = 100
+#: Set points kept after use, to recognise a copy the feedforward sends again when the plant
+#: re-sends a joint state (lockstep): with the lookahead it can arrive samples later.
+RECENT_SETPOINTS = wire.MAX_LOOKAHEAD + 2
+
+
+def _same_setpoint(used: wire.Setpoint | None, other: wire.Setpoint) -> bool:
+    """Whether ``other`` is a bit-identical copy of the set point ``used`` for its sample."""
+    return (
+        used is not None
+        and used.time_from_start_ns == other.time_from_start_ns
+        and all(
+            np.array_equal(a, b)
+            for a, b in zip(
+                (used.q, used.qd, used.qdd, used.u_n),
+                (other.q, other.qd, other.qdd, other.u_n),
+                strict=True,
+            )
+        )
+    )
 
 
 def make_law(kind: str, values: dict[str, Any], model: Any) -> FeedbackLaw:
@@ -208,6 +229,7 @@ class FeedbackNode(Node):
         self.diagnostics.set("controller", self.kind)
         self._states: dict[int, wire.JointSample] = {}
         self._setpoints: dict[int, wire.Setpoint] = {}
+        self._used_setpoints: dict[int, wire.Setpoint] = {}
         self._done: tuple[int, JointState, Float64MultiArray | None] | None = None
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
@@ -284,16 +306,25 @@ class FeedbackNode(Node):
             self.diagnostics.count(f"dropped.{topic}")
         return True
 
-    def _stale(self, stamp: int, topic: str) -> bool:
+    def _stale(self, stamp: int, topic: str, setpoint: wire.Setpoint | None = None) -> bool:
+        """True if sample ``stamp`` is done: a re-sent joint state is answered from the cache,
+        a copy of a used set point is counted as re-sent, a different one as a duplicate (the
+        sample just done) or rejected (older)."""
         if self._done is None or stamp > self._done[0]:
             return False
-        if stamp == self._done[0]:
-            if topic == wire.JOINT_STATES:
+        if topic == wire.JOINT_STATES:
+            if stamp == self._done[0]:
                 # Re-sent sample: answer from the cache, never update the identifier twice.
                 self.diagnostics.count("resent")
                 self.torque_pub.publish(self._done[1])
                 if self._done[2] is not None:
                     self.estimate_pub.publish(self._done[2])
+                return True
+        elif setpoint is not None and _same_setpoint(self._used_setpoints.get(stamp), setpoint):
+            self.diagnostics.count(f"resent.{topic}")
+            return True
+        elif stamp == self._done[0]:
+            self.diagnostics.count(f"duplicate.{topic}")  # the one used stands
             return True
         reject(self, self.diagnostics, topic, wire.WireError(f"stale stamp {stamp} ns"))
         return True
@@ -317,7 +348,7 @@ class FeedbackNode(Node):
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.SETPOINT, exc)
             return
-        if self._stale(setpoint.stamp_ns, wire.SETPOINT):
+        if self._stale(setpoint.stamp_ns, wire.SETPOINT, setpoint):
             return
         if self._hold(self._setpoints, setpoint.stamp_ns, setpoint, wire.SETPOINT):
             self._try(setpoint.stamp_ns)
@@ -330,6 +361,10 @@ class FeedbackNode(Node):
         for pending in (self._states, self._setpoints):
             for old in [s for s in pending if s <= stamp]:
                 del pending[old]
+        used = self._used_setpoints
+        used[stamp] = setpoint
+        if len(used) > RECENT_SETPOINTS:
+            del used[min(used)]
         k = stamp // self.period_ns
         if self._gain_updates:
             self._apply_gain_updates(k)
