@@ -1111,6 +1111,35 @@ def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(gr
     assert errors(plant) == 0
 
 
+def test_realtime_plant_starts_when_the_nominal_torque_ahead_overtakes_sample_0(graph):
+    """Real time: u_n(1) arriving before u_n(0) (reordered on a link with jitter, best effort)
+    is kept for sample 1, and u_n(0) still starts the run; a u_n(0) after u_n(1) has been
+    applied is out of order."""
+    scenario = paper_scenario("a")
+    params = RunSpec(scenario, "none", mode="realtime").node_parameters()["plant_node"]
+    params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
+    ff_pub, fb_pub, states = _stand_in_controllers(graph)
+    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=_overrides(params)))
+    period_ns = 100_000_000
+    graph.spin_until(lambda: 0 in states, what="sample 0")
+
+    a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
+    _torque(ff_pub, period_ns, b)  # ahead, first
+    graph.spin_until(lambda: period_ns in plant._ff_ahead, what="u_n(1) taken")
+    _torque(ff_pub, 0, a)
+    _torque(fb_pub, 0, np.zeros(N))
+    graph.spin_until(lambda: period_ns in states, what="sample 1")
+    effort = wire.joint_state_to_arrays(states[period_ns], NAMES, require=("effort",)).effort
+    np.testing.assert_array_equal(effort, a)
+    _torque(fb_pub, period_ns, np.zeros(N))
+    graph.spin_until(lambda: 2 * period_ns in states, what="sample 2")
+    effort = wire.joint_state_to_arrays(states[2 * period_ns], NAMES, require=("effort",)).effort
+    np.testing.assert_array_equal(effort, b)
+    _torque(ff_pub, 0, a)  # a late copy of u_n(0)
+    graph.spin_until(lambda: counter(plant, "out_of_order.feedforward/torque") == 1)
+    assert counter(plant, "rejected") == 0 and errors(plant) == 0
+
+
 def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     """PD with absurd gains in a lockstep run: every applied torque in the recording is within
     the URDF's effort limits, and saturation is on the recorded /diagnostics."""

@@ -292,9 +292,12 @@ class PlantNode(Node):
         grid, ahead of the current sample (a nominal torque: more than
         :data:`~apc_msgs_py.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
         sent sample 0 -- no controller can have computed it. Ignored and counted: older than the
-        newest torque taken (``out_of_order.<topic>``); in lockstep, an answer to a sample
-        already integrated (``stale.<topic>``, e.g. to a resend) and a second torque for a
-        sample (``duplicate.<topic>``: the first stands, nothing is applied twice).
+        newest torque taken for a sample that has come (``out_of_order.<topic>``); in lockstep,
+        an answer to a sample already integrated (``stale.<topic>``, e.g. to a resend) and a
+        second torque for a sample (``duplicate.<topic>``: the first stands, nothing is applied
+        twice). In real time a nominal torque sent ahead is kept by its sample and does not
+        make an older one out of order: over a link with jitter u_n(k + 1) can overtake u_n(k)
+        (best effort keeps no order), and u_n(0) dropped that way held the run at sample 0.
         """
         stamp = torque.stamp_ns
         current = self.k * self.period_ns
@@ -312,23 +315,26 @@ class PlantNode(Node):
         if newest is not None and stamp < newest:
             self.diagnostics.count(f"out_of_order.{topic}")
             return
-        if self.mode == "lockstep" and stamp < current:
-            self.diagnostics.count(f"stale.{topic}")
+        now = time.monotonic()
+        if self.mode == "lockstep":
+            if stamp < current:
+                self.diagnostics.count(f"stale.{topic}")
+            elif stamp in pending:
+                self.diagnostics.count(f"duplicate.{topic}")
+            else:
+                self._newest[topic] = stamp
+                if stamp == current:
+                    self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
+                pending[stamp] = torque.effort
+                self._lockstep_try()
             return
-        if self.mode == "lockstep" and stamp in pending:
-            self.diagnostics.count(f"duplicate.{topic}")
+        if stamp > current:
+            self._ff_ahead[stamp] = (stamp, torque.effort, now)  # _newest when its sample comes
             return
         self._newest[topic] = stamp
-        now = time.monotonic()
         if stamp == current:
             self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
-        if self.mode == "lockstep":
-            pending[stamp] = torque.effort
-            self._lockstep_try()
-        elif stamp > current:
-            self._ff_ahead[stamp] = (stamp, torque.effort, now)
-        else:
-            setattr(self, latest_attr, (stamp, torque.effort, now))
+        setattr(self, latest_attr, (stamp, torque.effort, now))
 
     def _promote_ahead(self) -> None:
         """Real time: the newest nominal torque sent ahead whose sample has come is the latest."""
@@ -339,6 +345,7 @@ class PlantNode(Node):
         newest = max(due)
         if self._ff_latest is None or newest > self._ff_latest[0]:
             self._ff_latest = self._ff_ahead[newest]
+            self._newest[wire.FEEDFORWARD_TORQUE] = newest
         for stamp in due:
             del self._ff_ahead[stamp]
 
