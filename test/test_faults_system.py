@@ -915,13 +915,34 @@ def _run_across_link(link: Link, tmp_path: Path, name: str, mode: str) -> tuple[
             assert time.monotonic() < deadline, "nodes in the namespaces did not start"
             assert all(p.poll() is None for p in kids.procs.values())
             time.sleep(0.05)
-        time.sleep(2.0)  # discovery across the link, so the recorder hears sample 0
+        # Discovery across the link (seconds when a discovery message is lost): the recorder
+        # says when it hears each controller topic, so it keeps sample 0.
+        heard = [
+            f"/{topic}: 1 publisher"
+            for topic in (wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE)
+        ]
+        while not all(line in kids.stderr("recorder") for line in heard):
+            assert time.monotonic() < deadline + 30, (
+                "the recorder did not hear the controllers",
+                kids.stderr("recorder")[-2000:],
+            )
+            time.sleep(0.05)
         plant = kids.start("plant_node", **a)
-        plant.wait(60)
-        time.sleep(0.5)  # the last torques reach the recorder
-        return plant.returncode, bag, kids.stderr("plant_node")
+        try:
+            plant.wait(60)
+        except subprocess.TimeoutExpired:
+            hung = True
+        else:
+            hung = False
+            time.sleep(0.5)  # the last torques reach the recorder
     finally:
         kids.close()
+    if hung:
+        pytest.fail(
+            f"{name}: the plant did not end within 60 s; its counters {_plant_counters(bag)}; "
+            f"its stderr: {kids.stderr('plant_node')[-1500:]}"
+        )
+    return plant.returncode, bag, kids.stderr("plant_node")
 
 
 def _plant_counters(bag: Path) -> dict[str, str]:
@@ -1000,11 +1021,18 @@ def test_network_namespaces_with_delay_and_loss(tmp_path):
         max_error_deg=np.rad2deg(offline_max).round(3).tolist(),
         link_stats=link.stats,
     )
+    summary = {
+        name: {k: v for k, v in r.items() if k not in ("stderr", "run")}
+        for name, r in results.items()
+    }
     for name in ("realtime_clean", "realtime_netem"):
         r = results[name]
         assert r["code"] == 0, r["stderr"][-2000:]
-        assert r["covered"] >= 0.95, (name, r["covered"])
-    assert results["realtime_netem"]["within_2x"] or results["realtime_netem_retry"]["within_2x"]
+        assert r["covered"] >= 0.95, (name, summary)
+    assert results["realtime_netem"]["within_2x"] or results["realtime_netem_retry"]["within_2x"], (
+        summary,
+        np.rad2deg(offline_max),
+    )
     lock = results["lockstep_netem"]
     if lock["code"] == 0:
         recorded = lock["run"]

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rclpy.event_handler import QoSSubscriptionMatchedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 
@@ -107,9 +108,17 @@ class RecorderNode(Node):
                     lambda data, topic=topic: self._on_message(topic, data),
                     _deep(spec.qos),
                     raw=True,
+                    event_callbacks=SubscriptionEventCallbacks(
+                        matched=lambda info, topic=topic: self._on_matched(topic, info)
+                    ),
                 )
             )
         self.get_logger().info(f"recording {len(specs)} topics to {path}")
+
+    def _on_matched(self, topic: str, info: QoSSubscriptionMatchedInfo) -> None:
+        # Says when a publisher is heard (or lost): a run started before the recorder hears
+        # every publisher misses its first messages, across a slow network for seconds.
+        self.get_logger().info(f"{topic}: {info.current_count} publisher(s)")
 
     def _on_message(self, topic: str, data: bytes) -> None:
         if self.writer.finished:
