@@ -131,7 +131,13 @@ class RecorderNode(Node):
         """Finish the MCAP file (idempotent)."""
         if not self.writer.finished:
             self.writer.finish()
-            self.get_logger().info(f"wrote {sum(self.counts.values())} messages to {self.path}")
+            line = f"wrote {sum(self.counts.values())} messages to {self.path}"
+            if self.context.ok():
+                self.get_logger().info(line)
+            else:
+                # After a signal the context is shut down and a logger call would also print
+                # "Failed to publish log message to rosout".
+                print(f"[{self.get_name()}]: {line}", file=sys.stderr)
 
 
 def main(args: list[str] | None = None) -> int:
