@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import itertools
 import json
 import re
 import sys
@@ -150,8 +151,11 @@ def setup_arm(n: int) -> tuple[dict[str, Any], dict[str, Callable[[int], Any]]]:
     law = AdaptiveFeedback(model, config)
     law.update(0, x.q[0], x.qd[0], x.q_d[0], x.qd_d[0], x.qdd_d[0], x.u_n[0], None)
 
+    sample = itertools.count(1)  # consecutive sample numbers: every call identifies
+
     def feedback(i: int) -> None:
-        law.update(i, x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.qdd_d[i], x.u_n[i], x.applied[i])
+        k = next(sample)
+        law.update(k, x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.qdd_d[i], x.u_n[i], x.applied[i])
 
     ops["feedback_step_us"] = feedback
 

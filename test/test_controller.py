@@ -208,3 +208,26 @@ def test_reconfigure_takes_new_weights_and_keeps_the_identified_model(controller
     assert not np.allclose(outs[0].du, outs[1].du)
     with pytest.raises(FeedbackError, match="identifier"):
         laws[1].reconfigure(AdaptiveConfig(rho=0.9))
+
+
+def test_a_gap_in_the_samples_skips_the_identification_step(controller_robot):
+    """Sample k-1 missing (lost on the network, a controller restarted): the step to k spans
+    two periods, so it is not identified (estimate and P unchanged, counted); the control still
+    uses the estimate, and the next consecutive sample identifies again."""
+    model = controller_robot.model
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    law = AdaptiveFeedback(model, AdaptiveConfig())
+    law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    law.update(1, q + 1e-3, qd, q_d, qd_d, qdd_d, u_n, u_n + 1.0)
+    theta, P = law.rls.theta.copy(), law.rls.P.copy()
+    out = law.update(3, q - 1e-3, qd, q_d, qd_d, qdd_d, u_n, u_n - 1.0)  # 2 is missing
+    assert out.skipped and not out.rejected and out.residual is None
+    assert law.skipped_updates == 1 and law.rls.n_updates == 1
+    np.testing.assert_array_equal(law.rls.theta, theta)
+    np.testing.assert_array_equal(law.rls.P, P)
+    dx = np.concatenate([q - 1e-3 - q_d, qd - qd_d])
+    expected = one_step_control(law.rls.F, law.rls.G, law.rls.w, law.Q, law.R, dx)
+    np.testing.assert_allclose(out.du, expected, rtol=1e-10)
+    out = law.update(4, q, qd, q_d, qd_d, qdd_d, u_n, u_n + out.du)
+    assert not out.skipped and law.rls.n_updates == 2 and out.residual is not None

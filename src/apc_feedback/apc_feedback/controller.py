@@ -50,12 +50,16 @@ class FeedbackOutput(NamedTuple):
     rejected : bool
         The identifier refused this sample's update (it would have made P or Θ non-finite or
         P indefinite, which is what covariance wind-up ends in); the previous estimate is kept.
+    skipped : bool
+        No update: sample ``k - 1`` was not handled (a gap), so the step to ``k`` is not the
+        one-period transition Eq. 16 describes.
     """
 
     du: np.ndarray
     residual: np.ndarray | None = None
     trace_p: float = float("nan")
     rejected: bool = False
+    skipped: bool = False
 
 
 class FeedbackLaw(ABC):
@@ -225,7 +229,10 @@ class AdaptiveFeedback(FeedbackLaw):
     1. at the first sample, ``F̂(0), Ĝ(0)`` from Eq. 33 at ``(q_d(0), qd_d(0), u_n(0))`` on the
        controller's model, ``ŵ(0) = 0``, ``P(0) = alpha I`` (Eq. 32);
     2. otherwise one RLS step (Eqs. 29-31) with ``z(k-1) = (dx(k-1), du(k-1), 1)`` and target
-       ``dx(k)``, where ``du(k-1)`` is the applied torque minus ``u_n(k-1)``;
+       ``dx(k)``, where ``du(k-1)`` is the applied torque minus ``u_n(k-1)``; only if the
+       previous sample handled was ``k - 1``: after a gap (samples lost on the network, a
+       controller restarted) the step spans several periods and would teach the identifier a
+       model that is not Eq. 16's, so it is skipped and the estimate kept;
     3. ``du(k) = -(R + ĜᵀQĜ)⁻¹ĜᵀQ(F̂ dx(k) + ŵ)`` (Eq. 35, exact minimiser of Eq. 34).
 
     Within the same structure (identified model, optimal control of it) two extensions can be
@@ -279,6 +286,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._started = False
         self.rejected_updates = 0
         self.projected_updates = 0
+        self.skipped_updates = 0
+        self._k_prev = 0
         # z(k-1) = (dx(k-1), du(k-1), 1) of Eq. 23, filled in place: dx(k) goes into its first
         # 2n entries once du(k) is known, du(k-1) is written when sample k arrives.
         self._z = np.zeros(3 * n + 1)
@@ -308,7 +317,7 @@ class AdaptiveFeedback(FeedbackLaw):
         if not math.isfinite(float(np.add.reduce(dx))):
             raise FeedbackError(f"state error is not finite at sample {k}")
         residual = None
-        rejected = False
+        rejected = skipped = False
         trace_p = float("nan")
         if not self._started:
             F0, G0 = initial_model(
@@ -316,6 +325,9 @@ class AdaptiveFeedback(FeedbackLaw):
             )
             self.rls.reset(F0, G0)
             self._started = True
+        elif k != self._k_prev + 1:
+            skipped = True
+            self.skipped_updates += 1
         else:
             if applied is not None and self._identify_applied:
                 np.subtract(applied, self._u_n_prev, out=self._z_du)
@@ -339,7 +351,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
-        return FeedbackOutput(du=du, residual=residual, trace_p=trace_p, rejected=rejected)
+        self._k_prev = k
+        return FeedbackOutput(du, residual, trace_p, rejected, skipped)
 
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.

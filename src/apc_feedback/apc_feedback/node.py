@@ -403,6 +403,8 @@ class FeedbackNode(Node):
             self.diagnostics.set("residual_norm", residual)
             if out.rejected:
                 self.diagnostics.count("rls_rejected_updates")
+            elif out.skipped:
+                self.diagnostics.count("rls_skipped_updates")
             # Built only for a listener (a recorder): a fifth of the node's work per sample.
             if self.estimate_pub.get_subscription_count() > 0:
                 try:
