@@ -176,6 +176,7 @@ class Observer:
         self.states: list[tuple[float, int, np.ndarray, np.ndarray, np.ndarray | None]] = []
         self.ff: dict[int, np.ndarray] = {}
         self.diag: list[tuple[float, int, str, dict[str, str]]] = []
+        self.feedback_diag: dict[str, str] = {}  # the feedback node's latest values
         self.raw: dict[tuple[str, str], list[tuple[float, bytes]]] = {}
         # A deep reader queue: the observer is the reference, it must not drop what it is slow
         # to take (KEEP_LAST 10 dropped five joint states once on a loaded machine).
@@ -218,6 +219,8 @@ class Observer:
             if status.name.endswith("plant_node"):
                 values = {kv.key: kv.value for kv in status.values}
                 self.diag.append((time.monotonic(), status.level, status.message, values))
+            elif status.name.endswith("feedback_node"):
+                self.feedback_diag = {kv.key: kv.value for kv in status.values}
 
     def _on_raw(self, topic: str, cls: type, data: bytes) -> None:
         key = ""
@@ -416,6 +419,13 @@ def test_realtime_controller_death_watchdog_and_restart(tmp_path, observer):
         assert np.ptp([s[2] for s in moving], axis=0).max() > 0.0
         obs.spin_until(
             lambda: obs.diag_after(t_back, DiagnosticStatus.OK), 5, "OK after the restart"
+        )
+        # The feedback saw no set point while the feedforward was down: its first sample after
+        # the restart is not one period after its last, so that step is not identified.
+        obs.spin_until(
+            lambda: int(obs.feedback_diag.get("rls_skipped_updates", 0)) >= 1,
+            5,
+            "the feedback's skipped identification step",
         )
         report(
             "restart (process start -> loop running again)",
