@@ -4,12 +4,11 @@ Each arm is the paper's (3-joint PUMA 560, case c, adaptive law) at 100 Hz in mo
 ``realtime``, its plant running until stopped. Two layouts:
 
 - ``three_processes_per_arm``: plant, feedforward and feedback each in its own process
-  (3N processes), EventsExecutor (``APC_EXECUTOR=events``; the executables' default is
-  the single-threaded executor, the third layout);
+  (3N processes), EventsExecutor (the executables' default);
 - ``one_process_per_arm``: the three nodes of an arm on one EventsExecutor in one process
   (N processes);
 - ``three_processes_per_arm_single_threaded_executor``: as the first with
-  ``SingleThreadedExecutor``, as ``ros2 run`` starts the single-node executables.
+  ``SingleThreadedExecutor`` (``APC_EXECUTOR=single``).
 
 All arms are started, the bench waits until every plant's clock runs, lets them run for
 ``--seconds`` more, and stops them. Per arm, over the window from 0.5 s after the last arm

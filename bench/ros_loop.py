@@ -13,9 +13,8 @@ nodes run in ``bench/node_proc.py`` processes on a random ``ROS_DOMAIN_ID``, loc
   plant to the later of the two torques stamped kT reaching it. A sample is late when either
   torque reaches the plant after it has stepped to k+1 (what the plant's ``late_samples``
   counter counts; both are reported). The first 0.2 s after the clock starts are skipped.
-- every process spins ``rclpy.experimental.EventsExecutor`` (as ``arm`` does, and the
-  single-node executables with ``APC_EXECUTOR=events``; they default to the single-threaded
-  executor, which the variants measure); variants,
+- every process spins ``rclpy.experimental.EventsExecutor`` (as every executable does unless
+  ``APC_EXECUTOR=single``); variants,
   as evidence for the choices made: ``SingleThreadedExecutor``, the feedforward without its
   lookahead (``lookahead: 0``, set point k answers joint state k), the nodes in one process,
   and ``Node(start_parameter_services=False)``.

