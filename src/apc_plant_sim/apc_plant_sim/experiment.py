@@ -117,6 +117,40 @@ def _wait(executor: Any, condition: Any, timeout_s: float, what: str) -> None:
         executor.spin_once(timeout_sec=0.02)
 
 
+#: Topics of which a complete lockstep recording holds a message for every sample 0..n.
+_PER_SAMPLE_TOPICS = (
+    "joint_states",
+    "feedforward/setpoint",
+    "feedforward/torque",
+    "feedback/torque",
+)
+
+
+def _drain(
+    executor: Any,
+    recorder: Any,
+    n_samples: int,
+    stop: Any,
+    least_s: float = 0.5,
+    most_s: float = 3.0,
+) -> None:
+    """Let the recorder take what is still queued once the plant has finished: at least
+    ``least_s`` (the plant's final /diagnostics), and up to ``most_s`` until it holds every
+    sample 0..``n_samples`` of the per-sample topics (a recorder that lagged behind a fast
+    lockstep run catches up instead of the file losing its tail)."""
+    if recorder is None:
+        return
+    names = [recorder.resolve_topic_name(t) for t in _PER_SAMPLE_TOPICS]
+    t0 = time.monotonic()
+    while True:
+        elapsed = time.monotonic() - t0
+        complete = all(recorder.counts.get(name, 0) > n_samples for name in names)
+        if elapsed >= most_s or (elapsed >= least_s and complete):
+            return
+        executor.spin_once(timeout_sec=0.01)
+        stop.check()
+
+
 def _overrides(values: Mapping[str, Any]) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in values.items()]
 
@@ -221,11 +255,7 @@ def run_in_process(
                 stop.check()
                 bar.update(plant.k)
             bar.close()
-            # Let the recorder take what is still queued (the final sample's torques).
-            deadline = time.monotonic() + 0.5
-            while time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.01)
-                stop.check()
+            _drain(executor, recorder, plant.n_samples if plant.done else 0, stop)
             if not plant.done:
                 return RunOutcome(
                     path, False, f"timed out after {timeout_s} s", plant.k, _since(t0)
@@ -326,10 +356,7 @@ def run_in_processes(
                             _since(t0),
                         )
             bar.close()
-            deadline = time.monotonic() + 0.5
-            while time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.01)
-                stop.check()
+            _drain(executor, recorder, spec.scenario.n_samples if plant.poll() == 0 else 0, stop)
             code = plant.poll()
             if code is None:
                 return RunOutcome(
