@@ -1084,29 +1084,38 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert errors(plant) == 0
 
 
+#: Period of the slow real-time plant the two tests below drive by hand (0.1 s).
+SLOW_PERIOD_NS = 100_000_000
+
+
+def _slow_realtime_plant(graph: Any) -> tuple[Any, Any, Any, dict]:
+    """A real-time plant at 10 Hz with the test playing both controllers, after sample 0."""
+    params = RunSpec(paper_scenario("a"), "none", mode="realtime").node_parameters()["plant_node"]
+    params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
+    ff_pub, fb_pub, states = _stand_in_controllers(graph)
+    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=_overrides(params)))
+    graph.spin_until(lambda: 0 in states, what="sample 0")
+    return plant, ff_pub, fb_pub, states
+
+
+def _applied_before(graph: Any, states: dict, k: int) -> np.ndarray:
+    """The torque joint state k reports as applied over the period before it."""
+    stamp = k * SLOW_PERIOD_NS
+    graph.spin_until(lambda: stamp in states, what=f"sample {k}")
+    return wire.joint_state_to_arrays(states[stamp], NAMES, require=("effort",)).effort
+
+
 def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(graph):
     """Real time, the test playing both controllers: u_n(1), sent with u_n(0) (the
     feedforward's lookahead), waits for sample 1; sample 0 applies u_n(0)."""
-    scenario = paper_scenario("a")
-    params = RunSpec(scenario, "none", mode="realtime").node_parameters()["plant_node"]
-    params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
-    ctx = graph.context
-    ff_pub, fb_pub, states = _stand_in_controllers(graph)
-    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
-    period_ns = 100_000_000
-    graph.spin_until(lambda: 0 in states, what="sample 0")
-
+    plant, ff_pub, fb_pub, states = _slow_realtime_plant(graph)
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
     _torque(ff_pub, 0, a)
-    _torque(ff_pub, period_ns, b)  # ahead
+    _torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead
     _torque(fb_pub, 0, np.zeros(N))
-    graph.spin_until(lambda: period_ns in states, what="sample 1")
-    effort = wire.joint_state_to_arrays(states[period_ns], NAMES, require=("effort",)).effort
-    np.testing.assert_array_equal(effort, a)
-    _torque(fb_pub, period_ns, np.ones(N))
-    graph.spin_until(lambda: 2 * period_ns in states, what="sample 2")
-    effort = wire.joint_state_to_arrays(states[2 * period_ns], NAMES, require=("effort",)).effort
-    np.testing.assert_array_equal(effort, b + 1.0)
+    np.testing.assert_array_equal(_applied_before(graph, states, 1), a)
+    _torque(fb_pub, SLOW_PERIOD_NS, np.ones(N))
+    np.testing.assert_array_equal(_applied_before(graph, states, 2), b + 1.0)
     assert counter(plant, "rejected") == 0 and counter(plant, "watchdog_trips") == 0
     assert errors(plant) == 0
 
@@ -1115,26 +1124,15 @@ def test_realtime_plant_starts_when_the_nominal_torque_ahead_overtakes_sample_0(
     """Real time: u_n(1) arriving before u_n(0) (reordered on a link with jitter, best effort)
     is kept for sample 1, and u_n(0) still starts the run; a u_n(0) after u_n(1) has been
     applied is out of order."""
-    scenario = paper_scenario("a")
-    params = RunSpec(scenario, "none", mode="realtime").node_parameters()["plant_node"]
-    params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
-    ff_pub, fb_pub, states = _stand_in_controllers(graph)
-    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=_overrides(params)))
-    period_ns = 100_000_000
-    graph.spin_until(lambda: 0 in states, what="sample 0")
-
+    plant, ff_pub, fb_pub, states = _slow_realtime_plant(graph)
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
-    _torque(ff_pub, period_ns, b)  # ahead, first
-    graph.spin_until(lambda: period_ns in plant._ff_ahead, what="u_n(1) taken")
+    _torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead, first
+    graph.spin_until(lambda: SLOW_PERIOD_NS in plant._ff_ahead, what="u_n(1) taken")
     _torque(ff_pub, 0, a)
     _torque(fb_pub, 0, np.zeros(N))
-    graph.spin_until(lambda: period_ns in states, what="sample 1")
-    effort = wire.joint_state_to_arrays(states[period_ns], NAMES, require=("effort",)).effort
-    np.testing.assert_array_equal(effort, a)
-    _torque(fb_pub, period_ns, np.zeros(N))
-    graph.spin_until(lambda: 2 * period_ns in states, what="sample 2")
-    effort = wire.joint_state_to_arrays(states[2 * period_ns], NAMES, require=("effort",)).effort
-    np.testing.assert_array_equal(effort, b)
+    np.testing.assert_array_equal(_applied_before(graph, states, 1), a)
+    _torque(fb_pub, SLOW_PERIOD_NS, np.zeros(N))
+    np.testing.assert_array_equal(_applied_before(graph, states, 2), b)
     _torque(ff_pub, 0, a)  # a late copy of u_n(0)
     graph.spin_until(lambda: counter(plant, "out_of_order.feedforward/torque") == 1)
     assert counter(plant, "rejected") == 0 and errors(plant) == 0
