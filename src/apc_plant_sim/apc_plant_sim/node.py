@@ -319,22 +319,21 @@ class PlantNode(Node):
         if self.mode == "lockstep":
             if stamp < current:
                 self.diagnostics.count(f"stale.{topic}")
-            elif stamp in pending:
+                return
+            if stamp in pending:
                 self.diagnostics.count(f"duplicate.{topic}")
-            else:
-                self._newest[topic] = stamp
-                if stamp == current:
-                    self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
-                pending[stamp] = torque.effort
-                self._lockstep_try()
-            return
-        if stamp > current:
+                return
+        elif stamp > current:
             self._ff_ahead[stamp] = (stamp, torque.effort, now)  # _newest when its sample comes
             return
         self._newest[topic] = stamp
         if stamp == current:
             self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
-        setattr(self, latest_attr, (stamp, torque.effort, now))
+        if self.mode == "lockstep":
+            pending[stamp] = torque.effort
+            self._lockstep_try()
+        else:
+            setattr(self, latest_attr, (stamp, torque.effort, now))
 
     def _promote_ahead(self) -> None:
         """Real time: the newest nominal torque sent ahead whose sample has come is the latest."""
