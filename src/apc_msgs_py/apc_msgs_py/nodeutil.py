@@ -373,18 +373,17 @@ def run_nodes(
     print_help: Callable[[], None],
     args: Sequence[str] | None = None,
     spin_until: Callable[[list[Node]], bool] | None = None,
-    default_executor: str = "events",
 ) -> int:
     """:func:`run_node` for several nodes in one process on one executor (composition).
 
     ``spin_until(nodes)`` returning True ends the run with the first node's ``exit_code``
-    that is not 0 (or 0). ``$APC_EXECUTOR`` overrides ``default_executor``.
+    that is not 0 (or 0). The executor is ``$APC_EXECUTOR``'s, ``events`` unless set.
     """
     argv = list(sys.argv[1:] if args is None else args)
     if {"-h", "--help"} & set(_user_args(argv)):
         print_help()
         return 0
-    executor_kind = os.environ.get(EXECUTOR_ENV) or default_executor
+    executor_kind = os.environ.get(EXECUTOR_ENV) or "events"
     if executor_kind not in EXECUTORS:
         print(f"{prog}: {EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}", file=sys.stderr)
         return 2

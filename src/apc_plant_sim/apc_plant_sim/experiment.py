@@ -138,8 +138,6 @@ def _drain(
     ``least_s`` (the plant's final /diagnostics), and up to ``most_s`` until it holds every
     sample 0..``n_samples`` of the per-sample topics (a recorder that lagged behind a fast
     lockstep run catches up instead of the file losing its tail)."""
-    if recorder is None:
-        return
     names = [recorder.resolve_topic_name(t) for t in _PER_SAMPLE_TOPICS]
     t0 = time.monotonic()
     while True:
