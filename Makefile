@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(VENV)/bin/pip
-PKGS   := src/apc_msgs_py src/apc_feedforward src/apc_feedback src/apc_plant_sim
+PKGS   := src/apc_core src/apc_feedforward src/apc_feedback src/apc_plant_sim
 STAMP  := $(VENV)/.apc-installed
 
 .PHONY: setup test test-fast lint run bench colcon clean

@@ -189,7 +189,7 @@ def random_arm(n: int, seed: int = 0) -> Any:
     """
     import pinocchio as pin
 
-    from apc_msgs_py.robot import Robot
+    from apc_core.robot import Robot
 
     rng = np.random.default_rng(seed)
     model = pin.Model()
@@ -237,7 +237,7 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
 
 def arm(n: int, seed: int = 0) -> tuple[Any, str]:
     """The arm used for ``n`` joints and its label: the PUMA URDFs for 3 and 6, else random."""
-    from apc_msgs_py.robot import load_robot
+    from apc_core.robot import load_robot
 
     if n == 3:
         return load_robot(PUMA3_URDF), "PUMA 560, 3 joints (config/puma560_3dof.urdf)"
@@ -340,10 +340,10 @@ BUCKETS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("plant dynamics", ("apc_plant_sim/plant.py", "pinocchio")),
     ("feedback law", ("apc_feedback/rls.py", "apc_feedback/optimal.py", "controller.py")),
     ("feedforward (trajectory, RNEA)", ("apc_feedforward/trajectory.py", "nominal.py")),
-    ("recorder (MCAP)", ("recorder.py", "apc_msgs_py/bag.py", "/mcap/", "zstandard")),
+    ("recorder (MCAP)", ("recorder.py", "apc_core/bag.py", "/mcap/", "zstandard")),
     (
         "messages (wire.py, msg classes)",
-        ("apc_msgs_py/wire.py", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
+        ("apc_core/wire.py", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
     ),
     ("apc nodes (callbacks, diagnostics)", ("/node.py", "nodeutil.py", "node_proc.py")),
     (

@@ -34,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
-from apc_msgs_py.robot import Payload, load_robot, with_inertia_error, with_payload
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import (
     PAPER_CASES,

@@ -142,10 +142,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--profile", help="cProfile the spin loop; top entries as JSON here")
     args = parser.parse_args(argv)
 
+    from apc_core.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
+    from apc_core.recorder import RecorderNode
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
-    from apc_msgs_py.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
-    from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
     params = json.loads(Path(args.params).read_text())

@@ -8,7 +8,7 @@ from typing import Any
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
-from apc_msgs_py.nodeutil import destroy_nodes
+from apc_core.nodeutil import destroy_nodes
 
 
 class Graph:

@@ -21,7 +21,7 @@ import yaml
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from apc_msgs_py import wire
+from apc_core import wire
 from apc_plant_sim.experiment import RunSpec
 from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
 

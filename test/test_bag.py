@@ -39,8 +39,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty, Float64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_msgs_py import bag, wire
-from apc_msgs_py.bag import BagError, BagTruncatedWarning, BagWriter
+from apc_core import bag, wire
+from apc_core.bag import BagError, BagTruncatedWarning, BagWriter
 
 with warnings.catch_warnings():  # mcap_ros2.reader warns about itself on import (deprecation)
     warnings.simplefilter("ignore", DeprecationWarning)
@@ -447,7 +447,7 @@ def test_ros2_profile_encodings_channel_metadata_and_rosbag2_record(run_bag):
         reader = make_reader(stream)
         header = reader.get_header()
         assert header.profile == "ros2"
-        assert header.library.startswith("apc_msgs_py.bag")
+        assert header.library.startswith("apc_core.bag")
         summary = reader.get_summary()
         schemas = {s.name: s for s in summary.schemas.values()}
         assert set(schemas) == {s.type_name for s in wire.TOPICS}  # one schema per type
@@ -726,7 +726,7 @@ def test_a_chunk_is_in_the_stream_as_soon_as_it_is_complete():
 _CHILD = textwrap.dedent(
     """
     import sys, time
-    from apc_msgs_py import bag, wire
+    from apc_core import bag, wire
     import numpy as np
     path, n = sys.argv[1], int(sys.argv[2])
     writer = bag.BagWriter(path, chunk_size=2048)

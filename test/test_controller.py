@@ -6,11 +6,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from apc_core.robot import load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import one_step_control
-from apc_msgs_py.robot import load_robot, with_inertia_error
 from apc_plant_sim.scenario import CONFIG_DIR, make_feedback
 
 rng = np.random.default_rng(7)

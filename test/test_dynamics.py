@@ -19,8 +19,8 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.integrate import solve_ivp
 
+from apc_core.robot import PAPER_MAX_PAYLOAD_KG, Payload, Robot, load_robot, with_payload
 from apc_feedforward.nominal import nominal_torque
-from apc_msgs_py.robot import PAPER_MAX_PAYLOAD_KG, Payload, Robot, load_robot, with_payload
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError, PlantStep
 
 ROOT = Path(__file__).resolve().parents[1]

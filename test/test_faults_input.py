@@ -34,10 +34,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from apc_core import wire
+from apc_core.robot import load_robot
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
-from apc_msgs_py import wire
-from apc_msgs_py.robot import load_robot
 from apc_plant_sim.experiment import RunSpec
 from apc_plant_sim.node import PlantNode
 from apc_plant_sim.scenario import PUMA_3DOF_URDF, paper_scenario, paper_settings, run_offline
@@ -1141,7 +1141,7 @@ def test_realtime_plant_starts_when_the_nominal_torque_ahead_overtakes_sample_0(
 def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     """PD with absurd gains in a lockstep run: every applied torque in the recording is within
     the URDF's effort limits, and saturation is on the recorded /diagnostics."""
-    from apc_msgs_py.bag import read_messages
+    from apc_core.bag import read_messages
     from apc_plant_sim.experiment import run_in_process
     from apc_plant_sim.recording import load_run
 

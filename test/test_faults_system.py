@@ -41,8 +41,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from apc_msgs_py import wire
-from apc_msgs_py.bag import BagTruncatedWarning, bag_info, read_messages, recover
+from apc_core import wire
+from apc_core.bag import BagTruncatedWarning, bag_info, read_messages, recover
 from apc_plant_sim.experiment import RunSpec, stop_processes
 from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
 
@@ -51,7 +51,7 @@ MODULES = {
     "plant_node": "apc_plant_sim.node",
     "feedforward_node": "apc_feedforward.node",
     "feedback_node": "apc_feedback.node",
-    "recorder": "apc_msgs_py.recorder",
+    "recorder": "apc_core.recorder",
 }
 T = 0.010
 WATCHDOG_S = 0.05

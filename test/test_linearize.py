@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from apc_core.robot import load_robot, with_inertia_error
 from apc_feedback.linearize import (
     LinearizeError,
     continuous_jacobians,
@@ -15,7 +16,6 @@ from apc_feedback.linearize import (
     discretize_series,
     initial_model,
 )
-from apc_msgs_py.robot import load_robot, with_inertia_error
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
 

@@ -81,7 +81,7 @@ def test_a_real_recording_opens_in_independent_readers(tmp_path):
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
 
-    from apc_msgs_py.bag import bag_info
+    from apc_core.bag import bag_info
 
     spec = RunSpec(paper_scenario("b", hold_s=0.0), "adaptive", paper_settings(), name="readers")
     outcome = run_in_process(spec, tmp_path, progress=False, timeout_s=120)

@@ -13,11 +13,11 @@ from builtin_interfaces.msg import Duration
 from rclpy.parameter import Parameter
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from apc_core import wire
+from apc_core.bag import read_messages
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_feedforward.trajectory import Waypoints
-from apc_msgs_py import wire
-from apc_msgs_py.bag import read_messages
 from apc_plant_sim.experiment import RunSpec, run_in_processes
 from apc_plant_sim.node import PlantNode
 from apc_plant_sim.recording import load_run

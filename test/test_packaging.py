@@ -5,7 +5,7 @@ then: every executable is in ``install/<pkg>/lib/<pkg>/`` (where ``ros2 run`` lo
 console script in the venv; package.xml, the ament resource marker and apc's config files are
 under ``share``; the nodes start from the install the way ``ros2 run`` starts them (after
 ``. install/setup.sh``, with the venv — where rclpy and the message packages live — as the
-underlay of the workspace) and find their URDF in ``share/apc_msgs_py/config``, not in the
+underlay of the workspace) and find their URDF in ``share/apc_core/config``, not in the
 source checkout.
 """
 
@@ -29,19 +29,19 @@ VENV = Path(sys.prefix)
 VENV_BIN = VENV / "bin"
 
 EXECUTABLES: dict[str, tuple[str, ...]] = {
-    "apc_msgs_py": ("recorder", "player"),
+    "apc_core": ("recorder", "player"),
     "apc_feedforward": ("feedforward_node",),
     "apc_feedback": ("feedback_node",),
     "apc_plant_sim": ("plant_node", "arm", "experiment", "analyze"),
 }
 #: One executable of each package, run to ``--help``.
 HELP_RUNS = (
-    ("apc_msgs_py", "recorder"),
+    ("apc_core", "recorder"),
     ("apc_feedforward", "feedforward_node"),
     ("apc_feedback", "feedback_node"),
     ("apc_plant_sim", "plant_node"),
 )
-#: Installed into share/apc_msgs_py/config (relative to the repository's config/).
+#: Installed into share/apc_core/config (relative to the repository's config/).
 CONFIG_GLOBS = ("*.urdf", "*.yaml", "reference/*.json")
 PARAMS_FILE = "puma560_3dof.yaml"
 
@@ -178,7 +178,7 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workspace]:
 
 
 def test_config_link_in_source_package():
-    link = REPO / "src" / "apc_msgs_py" / "config"
+    link = REPO / "src" / "apc_core" / "config"
     assert link.is_symlink() and not Path(os.readlink(link)).is_absolute()
     assert link.resolve() == (REPO / "config").resolve()
 
@@ -209,7 +209,7 @@ def test_config_installed_as_files(workspace):
     source = REPO / "config"
     expected = sorted(p.relative_to(source) for g in CONFIG_GLOBS for p in source.glob(g))
     assert Path("puma560_3dof.urdf") in expected and Path(PARAMS_FILE) in expected
-    installed = workspace.share("apc_msgs_py") / "config"
+    installed = workspace.share("apc_core") / "config"
     found = sorted(p.relative_to(installed) for p in installed.rglob("*") if not p.is_dir())
     assert found == expected
     for rel in expected:
@@ -254,9 +254,9 @@ def test_help_from_install_and_venv(workspace):
 
 def test_config_resolved_through_install_share(workspace):
     """From a directory outside the repo, apc is imported from the install and its config
-    files are found in share/apc_msgs_py/config of the install, not in the checkout."""
+    files are found in share/apc_core/config of the install, not in the checkout."""
     probe = (
-        "import apc_msgs_py.nodeutil as u;"
+        "import apc_core.nodeutil as u;"
         "print(u.__file__);"
         f"print(u.resolve_config_path('puma560_3dof.urdf'));"
         f"print(u.resolve_config_path('{PARAMS_FILE}'))"
@@ -264,8 +264,8 @@ def test_config_resolved_through_install_share(workspace):
     proc = workspace.run(sys.executable, "-c", probe)
     assert proc.returncode == 0, proc.stderr
     module, urdf, params = (Path(line) for line in proc.stdout.split())
-    assert module.is_relative_to(workspace.install / "apc_msgs_py"), module
-    config = workspace.share("apc_msgs_py") / "config"
+    assert module.is_relative_to(workspace.install / "apc_core"), module
+    config = workspace.share("apc_core") / "config"
     assert urdf == config / "puma560_3dof.urdf"
     assert params == config / PARAMS_FILE
 
@@ -294,7 +294,7 @@ def _wait_for_node(name: str, child: subprocess.Popen, timeout_s: float) -> bool
 
 @pytest.mark.ros
 def test_feedback_node_runs_from_install_and_stops_on_sigint(workspace, ros_domain):
-    params = workspace.share("apc_msgs_py") / "config" / PARAMS_FILE
+    params = workspace.share("apc_core") / "config" / PARAMS_FILE
     out, err = workspace.root / "feedback_node.out", workspace.root / "feedback_node.err"
     with open(out, "w") as stdout, open(err, "w") as stderr:
         child = workspace.popen(

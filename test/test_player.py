@@ -17,11 +17,11 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from apc_core import wire
+from apc_core.bag import read_messages
+from apc_core.nodeutil import destroy_nodes
+from apc_core.player import PlayerNode, main
 from apc_feedback.node import FeedbackNode
-from apc_msgs_py import wire
-from apc_msgs_py.bag import read_messages
-from apc_msgs_py.nodeutil import destroy_nodes
-from apc_msgs_py.player import PlayerNode, main
 from apc_plant_sim.experiment import RunSpec, run_in_process
 from apc_plant_sim.scenario import paper_scenario, paper_settings
 

@@ -1,4 +1,4 @@
-"""apc_msgs_py.robot: the PUMA URDFs against the DH table, payload, inertia error, loader guards.
+"""apc_core.robot: the PUMA URDFs against the DH table, payload, inertia error, loader guards.
 
 The forward kinematics are checked against a standard-DH product written here from
 ``config/reference/puma560.json`` alone, so a mistake in ``tools/make_puma_urdf.py`` cannot hide
@@ -16,7 +16,7 @@ import pinocchio as pin
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from apc_msgs_py.robot import (
+from apc_core.robot import (
     PAPER_MAX_PAYLOAD_KG,
     Payload,
     Robot,

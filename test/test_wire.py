@@ -18,8 +18,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_msgs_py import wire
-from apc_msgs_py.wire import WireError
+from apc_core import wire
+from apc_core.wire import WireError
 
 NAMES = ["j1", "j2", "j3"]
 PERM = [2, 0, 1]  # message order: j3, j1, j2

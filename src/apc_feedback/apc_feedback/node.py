@@ -31,10 +31,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
-from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
-from apc_msgs_py import wire
-from apc_msgs_py.nodeutil import (
+from apc_core import wire
+from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
@@ -45,8 +43,10 @@ from apc_msgs_py.nodeutil import (
     run_node,
     sample_index,
 )
-from apc_msgs_py.params import ConfigError, Param, check_number, declare, subset
-from apc_msgs_py.robot import with_inertia_error
+from apc_core.params import ConfigError, Param, check_number, declare, subset
+from apc_core.robot import with_inertia_error
+from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
 
 CONTROLLER_KINDS = ("adaptive", "computed_torque", "pd", "none")
 

@@ -30,16 +30,8 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_feedforward.nominal import Feedforward, FeedforwardError, Setpoint
-from apc_feedforward.trajectory import (
-    FourThreeFour,
-    Quintic,
-    Trajectory,
-    TrajectoryError,
-    Waypoints,
-)
-from apc_msgs_py import wire
-from apc_msgs_py.nodeutil import (
+from apc_core import wire
+from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
@@ -50,8 +42,16 @@ from apc_msgs_py.nodeutil import (
     run_node,
     sample_index,
 )
-from apc_msgs_py.params import ConfigError, Param, declare
-from apc_msgs_py.robot import with_inertia_error
+from apc_core.params import ConfigError, Param, declare
+from apc_core.robot import with_inertia_error
+from apc_feedforward.nominal import Feedforward, FeedforwardError, Setpoint
+from apc_feedforward.trajectory import (
+    FourThreeFour,
+    Quintic,
+    Trajectory,
+    TrajectoryError,
+    Waypoints,
+)
 
 #: Goals waiting for the current motion to end; one more is rejected (a flood is not a plan).
 MAX_QUEUED_GOALS = 100
@@ -92,7 +92,7 @@ class FeedforwardNode(Node):
     Parameters
     ----------
     qos : QoSProfile
-        Profile of the control-loop topics (default :data:`apc_msgs_py.wire.CONTROL_QOS`).
+        Profile of the control-loop topics (default :data:`apc_core.wire.CONTROL_QOS`).
     kwargs :
         Passed to ``rclpy.node.Node`` (namespace, parameter_overrides, ...).
     """

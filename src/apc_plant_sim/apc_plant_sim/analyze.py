@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from apc_msgs_py.bag import BagError
-from apc_msgs_py.nodeutil import resolve_config_path
-from apc_msgs_py.robot import Robot, RobotModelError, load_robot
+from apc_core.bag import BagError
+from apc_core.nodeutil import resolve_config_path
+from apc_core.robot import Robot, RobotModelError, load_robot
 from apc_plant_sim.metrics import compute_metrics
 from apc_plant_sim.recording import RecordedRun, load_run
 

@@ -22,11 +22,11 @@ from collections.abc import Sequence
 
 from rclpy.node import Node
 
+from apc_core.nodeutil import print_help, run_nodes
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS
 from apc_feedforward.node import FeedforwardNode
-from apc_msgs_py.nodeutil import print_help, run_nodes
 from apc_plant_sim.node import PARAMS as PLANT_PARAMS
 from apc_plant_sim.node import PlantNode
 

@@ -30,8 +30,8 @@ import yaml
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
-from apc_msgs_py.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
-from apc_msgs_py.params import ConfigError
+from apc_core.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
+from apc_core.params import ConfigError
 from apc_plant_sim.scenario import (
     CONTROLLERS,
     PAPER_CASES,
@@ -101,7 +101,7 @@ class RunSpec:
 
 def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
     """True once the recorder has discovered the controllers' publishers (so sample 0 is kept)."""
-    from apc_msgs_py import wire
+    from apc_core import wire
 
     topics = [wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE]
     if controller == "adaptive":
@@ -199,9 +199,9 @@ def run_in_process(
     installs no handlers for a context of our own): the recording is finished, every node
     destroyed, and the outcome says ``interrupted``.
     """
+    from apc_core.recorder import RecorderNode
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
-    from apc_msgs_py.recorder import RecorderNode
     from apc_plant_sim.node import PlantNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -281,7 +281,7 @@ def run_in_processes(
     and are waited for (:func:`stop_processes`), the recording is finished, and the outcome
     says ``interrupted``. No child outlives the runner.
     """
-    from apc_msgs_py.recorder import RecorderNode
+    from apc_core.recorder import RecorderNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{spec.name}.mcap"

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pinocchio as pin
 
-from apc_msgs_py.robot import Robot
+from apc_core.robot import Robot
 
 
 @dataclass(frozen=True)

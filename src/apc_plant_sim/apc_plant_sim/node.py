@@ -41,8 +41,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
-from apc_msgs_py import wire
-from apc_msgs_py.nodeutil import (
+from apc_core import wire
+from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
@@ -53,8 +53,8 @@ from apc_msgs_py.nodeutil import (
     run_node,
     sample_index,
 )
-from apc_msgs_py.params import ConfigError, Param, declare
-from apc_msgs_py.robot import Payload, RobotModelError, with_payload
+from apc_core.params import ConfigError, Param, declare
+from apc_core.robot import Payload, RobotModelError, with_payload
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 
 MODES = ("realtime", "lockstep")
@@ -290,7 +290,7 @@ class PlantNode(Node):
 
         Rejected (counted in ``rejected.<topic>``): a stamp that is negative, off the sample
         grid, ahead of the current sample (a nominal torque: more than
-        :data:`~apc_msgs_py.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
+        :data:`~apc_core.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
         sent sample 0 -- no controller can have computed it. Ignored and counted: older than the
         newest torque taken for a sample that has come (``out_of_order.<topic>``); in lockstep,
         an answer to a sample already integrated (``stale.<topic>``, e.g. to a resend) and a

@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from apc_core.robot import Robot
 from apc_feedback.controller import FeedbackLaw
 from apc_feedforward.nominal import Feedforward
-from apc_msgs_py.robot import Robot
 from apc_plant_sim.plant import Plant
 
 

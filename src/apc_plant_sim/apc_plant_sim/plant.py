@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 import pinocchio as pin
 
-from apc_msgs_py.robot import Robot
+from apc_core.robot import Robot
 
 
 class PlantError(ValueError):

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from apc_msgs_py import wire
-from apc_msgs_py.bag import bag_info, read_messages
+from apc_core import wire
+from apc_core.bag import bag_info, read_messages
 
 
 @dataclass

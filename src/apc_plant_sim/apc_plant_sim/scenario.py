@@ -23,11 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
-from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
-from apc_feedforward.nominal import Feedforward
-from apc_feedforward.trajectory import FourThreeFour
-from apc_msgs_py.robot import (
+from apc_core.robot import (
     PAPER_GRAVITY_M_S2,
     PAPER_MAX_PAYLOAD_KG,
     Payload,
@@ -36,6 +32,10 @@ from apc_msgs_py.robot import (
     with_inertia_error,
     with_payload,
 )
+from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedforward.nominal import Feedforward
+from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.offline import RunResult, run_closed_loop
 from apc_plant_sim.plant import Plant, PlantConfig
 

@@ -3,11 +3,11 @@ from pathlib import Path
 
 from setuptools import find_packages, setup
 
-package_name = "apc_msgs_py"
+package_name = "apc_core"
 
 # config/ is a relative symlink to the repository's top-level config/ (URDFs, parameter files,
-# reference data); its files are installed as copies into share/apc_msgs_py/config, where
-# apc_msgs_py.nodeutil.resolve_config_path finds them through ament_index_python.
+# reference data); its files are installed as copies into share/apc_core/config, where
+# apc_core.nodeutil.resolve_config_path finds them through ament_index_python.
 _HERE = Path(__file__).resolve().parent
 
 
@@ -16,7 +16,7 @@ def _config_files(pattern: str) -> list[str]:
     files = sorted(glob(pattern, root_dir=_HERE))
     if not files:
         raise SystemExit(
-            f"apc_msgs_py: no config files match {pattern!r} (is config/ a dangling link?)"
+            f"apc_core: no config files match {pattern!r} (is config/ a dangling link?)"
         )
     return files
 
@@ -45,8 +45,8 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "recorder = apc_msgs_py.recorder:main",
-            "player = apc_msgs_py.player:main",
+            "recorder = apc_core.recorder:main",
+            "player = apc_core.player:main",
         ],
     },
 )

@@ -20,10 +20,10 @@ from rclpy.event_handler import QoSSubscriptionMatchedInfo, SubscriptionEventCal
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 
-from apc_msgs_py import wire
-from apc_msgs_py.bag import BagWriter
-from apc_msgs_py.nodeutil import run_node
-from apc_msgs_py.params import ConfigError, Param, declare
+from apc_core import wire
+from apc_core.bag import BagWriter
+from apc_core.nodeutil import run_node
+from apc_core.params import ConfigError, Param, declare
 
 PARAMS: tuple[Param, ...] = (
     Param("output", "", "MCAP file to write; empty = apc_<wall time>.mcap in the cwd"),

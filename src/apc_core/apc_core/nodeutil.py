@@ -33,11 +33,11 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from apc_msgs_py.params import ConfigError, Param
-from apc_msgs_py.robot import PAPER_GRAVITY_M_S2, Robot, RobotModelError, load_robot
-from apc_msgs_py.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
+from apc_core.params import ConfigError, Param
+from apc_core.robot import PAPER_GRAVITY_M_S2, Robot, RobotModelError, load_robot
+from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
 
-#: Where ``config/`` is in a source checkout (src/apc_msgs_py/apc_msgs_py/ -> repo root).
+#: Where ``config/`` is in a source checkout (src/apc_core/apc_core/ -> repo root).
 _REPO_CONFIG = Path(__file__).resolve().parents[3] / "config"
 
 ROBOT_PARAMS: tuple[Param, ...] = (
@@ -50,7 +50,7 @@ ROBOT_PARAMS: tuple[Param, ...] = (
         "robot_description_path",
         "puma560_3dof.urdf",
         "URDF file: absolute, relative to the working directory, or a file name in apc's "
-        "config directory (share/apc_msgs_py/config in a ROS install)",
+        "config directory (share/apc_core/config in a ROS install)",
     ),
     Param("gravity", PAPER_GRAVITY_M_S2, "gravity along -z of the base frame (m/s^2)", 0.0, 100.0),
     Param(
@@ -75,7 +75,7 @@ def config_dirs() -> list[Path]:
     try:
         from ament_index_python.packages import get_package_share_directory
 
-        dirs.append(Path(get_package_share_directory("apc_msgs_py")) / "config")
+        dirs.append(Path(get_package_share_directory("apc_core")) / "config")
     except Exception:  # no ament index (plain venv without AMENT_PREFIX_PATH)
         pass
     dirs.append(_REPO_CONFIG)

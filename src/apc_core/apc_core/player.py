@@ -3,7 +3,7 @@
 Each message goes out on the topic it was recorded on (the resolved name, e.g.
 ``/joint_states``), with its recorded type, as the **raw CDR bytes** read from the file (no
 deserialise / serialise round trip), and with the QoS its publishers offered
-(``offered_qos_profiles`` of the channel, else :data:`apc_msgs_py.wire.TOPICS`, else the ROS
+(``offered_qos_profiles`` of the channel, else :data:`apc_core.wire.TOPICS`, else the ROS
 default). Message ``i`` of the selected window goes out at wall time
 ``t0 + (log_time_i - window_start) / rate``, in log-time order.
 
@@ -71,8 +71,8 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from apc_msgs_py import wire
-from apc_msgs_py.bag import (
+from apc_core import wire
+from apc_core.bag import (
     BagError,
     BagMessage,
     bag_info,
@@ -80,8 +80,8 @@ from apc_msgs_py.bag import (
     qos_profiles_from_yaml,
     read_messages,
 )
-from apc_msgs_py.nodeutil import run_node
-from apc_msgs_py.params import ConfigError, Param, declare
+from apc_core.nodeutil import run_node
+from apc_core.params import ConfigError, Param, declare
 
 #: ``--clock`` without a value: the rate of ``ros2 bag play --clock``.
 DEFAULT_CLOCK_HZ = 40.0
@@ -186,7 +186,7 @@ def offered_qos(recorded_topic: str, offered_yaml: str) -> QoSProfile:
 
     One recorded publisher, or several offering the same profile: that profile. Several
     differing ones: RELIABLE only if all were, TRANSIENT_LOCAL only if all were, the largest
-    depth. Nothing recorded (or unreadable): the :data:`apc_msgs_py.wire.TOPICS` profile of
+    depth. Nothing recorded (or unreadable): the :data:`apc_core.wire.TOPICS` profile of
     the topic (matched by name, relative names at the end of the recorded one), else the ROS
     default (RELIABLE, KEEP_LAST 10, VOLATILE).
 

@@ -113,7 +113,7 @@ MESSAGE_ENCODING = "cdr"
 ROSBAG2_METADATA_VERSION = 9
 #: Header ``library`` field: this writer, then the MCAP library it drives (rosbag2 writes
 #: ``libmcap <version>``).
-LIBRARY = f"apc_msgs_py.bag 0.1.0; mcap-python {mcap_version}"
+LIBRARY = f"apc_core.bag 0.1.0; mcap-python {mcap_version}"
 #: Uncompressed bytes per chunk (rosbag2's default too). At apc's ~200 kB/s this is ~5 s of a run;
 #: pass ``max_chunk_interval_ns`` to bound the loss on a crash in time as well.
 DEFAULT_CHUNK_SIZE = 1024 * 1024
