@@ -7,13 +7,16 @@ All are expressed as a perturbation torque ``du = tau - u_n`` so that the plant,
   ``tau = D(q)[qdd_d + Kv (qd_d - qd) + Kp (q_d - q)] + h(q, qd) + c(q)``, evaluated as one
   RNEA call at the measured state with the commanded acceleration. Paper: Kp = 100, Kv = 20.
 - :class:`PD` — ``du = Kp (q_d - q) + Kv (qd_d - qd)`` on top of the nominal torque.
+- :class:`PID` — what a ROS user tries first: ros2_controllers' joint_trajectory_controller on an
+  effort interface with the nominal torque as the trajectory's feed-forward effort,
+  ``tau = u_n + Kp e + Ki ∫e + Kd e'`` per joint (control_toolbox::Pid), gains per joint.
 - :class:`NoFeedback` — ``du = 0``: feedforward only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -81,6 +84,129 @@ class PD(FeedbackLaw):
 
     def update(self, k, q, qd, q_d, qd_d, qdd_d, u_n, applied) -> FeedbackOutput:
         return FeedbackOutput(du=self.gains.kp * (q_d - q) + self.gains.kv * (qd_d - qd))
+
+
+@dataclass(frozen=True)
+class PidGains:
+    """Per-joint PID gains, JTC's ``gains.<joint>.p/i/d/i_clamp``, or the tuning rule's inputs.
+
+    Empty ``p``, ``i``, ``d`` mean: tune at the first sample (:meth:`tuned`) from the
+    controller model's joint-space inertia at the first set point, the way a user tunes each
+    joint as a decoupled inertia ``J_i = D(q_0)_ii``: all three closed-loop poles of
+    ``J s³ + Kd s² + Kp s + Ki`` at ``-bandwidth``, i.e. ``Kp = 3 J ω²``, ``Kd = 3 J ω``,
+    ``Ki = J ω³``. The default ``ω = 10 rad/s`` is the bandwidth of the paper's computed torque
+    (``Kp = 100``, ``Kv = 20``: a double pole at -10 rad/s), so the two baselines are equally
+    fast; ``i_clamp`` defaults to ``i_clamp_fraction`` of the joint's effort limit.
+
+    Attributes
+    ----------
+    p, i, d : per joint
+        N m/rad, N m/(rad s), N m s/rad.
+    i_clamp : per joint
+        Bound on ``|Ki ∫e|`` (N m): the integrator stops where its term would pass it
+        (control_toolbox's anti-windup).
+    bandwidth : float
+        ω of the tuning rule (rad/s).
+    i_clamp_fraction : float
+        Default ``i_clamp`` as a fraction of the effort limit.
+    """
+
+    p: tuple[float, ...] = ()
+    i: tuple[float, ...] = ()
+    d: tuple[float, ...] = ()
+    i_clamp: tuple[float, ...] = ()
+    bandwidth: float = 10.0
+    i_clamp_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        for name in ("p", "i", "d", "i_clamp"):
+            values = tuple(float(v) for v in getattr(self, name))
+            if not all(np.isfinite(v) and v >= 0.0 for v in values):
+                raise FeedbackError(f"{name} must be finite and >= 0, got {list(values)}")
+            object.__setattr__(self, name, values)
+        given = {name for name in ("p", "i", "d") if getattr(self, name)}
+        if given and given != {"p", "i", "d"}:
+            raise FeedbackError("pid gains p, i and d must be given together (or none: tuned)")
+        if not (np.isfinite(self.bandwidth) and self.bandwidth > 0.0):
+            raise FeedbackError(f"bandwidth must be > 0 rad/s, got {self.bandwidth}")
+        if not (np.isfinite(self.i_clamp_fraction) and self.i_clamp_fraction >= 0.0):
+            raise FeedbackError(f"i_clamp_fraction must be >= 0, got {self.i_clamp_fraction}")
+
+    @staticmethod
+    def from_dict(values: Mapping[str, Any]) -> PidGains:
+        known = {"p", "i", "d", "i_clamp", "bandwidth", "i_clamp_fraction"}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise FeedbackError(f"unknown gain parameter {unknown[0]!r}")
+        return PidGains(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+    def tuned(self, model: pin.Model, q0: np.ndarray, effort_limit: np.ndarray) -> PidGains:
+        """These gains with every empty entry filled by the tuning rule at pose ``q0``."""
+        n = model.nv
+        out = {}
+        if not self.p:
+            inertia = np.array(pin.crba(model, model.createData(), q0)).diagonal()
+            w = self.bandwidth
+            out = {"p": 3.0 * inertia * w**2, "d": 3.0 * inertia * w, "i": inertia * w**3}
+        if not self.i_clamp:
+            out["i_clamp"] = self.i_clamp_fraction * np.asarray(effort_limit, dtype=float)
+        gains = replace(self, **{k: tuple(float(x) for x in v) for k, v in out.items()})
+        for name in ("p", "i", "d", "i_clamp"):
+            if len(getattr(gains, name)) != n:
+                raise FeedbackError(f"pid {name} needs {n} values, got {len(getattr(gains, name))}")
+        return gains
+
+
+class PID(FeedbackLaw):
+    """Per-joint PID on top of the nominal torque, as JTC computes an effort command.
+
+    ``e = q_d - q``, ``e' = qd_d - qd`` (JTC passes the velocity error as the error's
+    derivative, no differencing); the integrator ``I += T e`` is held within
+    ``±i_clamp / Ki`` so that the integral term never exceeds ``i_clamp``.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        The controller's model (for the tuning rule only).
+    effort_limit : (n,) array
+        The arm's effort limits (default ``i_clamp``).
+    period : float
+        Sampling period T (s).
+    gains : PidGains
+    """
+
+    kind = "pid"
+
+    def __init__(
+        self,
+        model: pin.Model,
+        effort_limit: np.ndarray,
+        period: float,
+        gains: PidGains | None = None,
+    ) -> None:
+        super().__init__(model.nv)
+        if not (np.isfinite(period) and period > 0.0):
+            raise FeedbackError(f"period must be > 0 s, got {period}")
+        self.model = model
+        self.period = float(period)
+        self.effort_limit = np.asarray(effort_limit, dtype=float)
+        self.requested = gains or PidGains()
+        self.reset()
+
+    def reset(self) -> None:
+        self.gains: PidGains | None = None
+        self.integral = np.zeros(self.n_joints)
+
+    def update(self, k, q, qd, q_d, qd_d, qdd_d, u_n, applied) -> FeedbackOutput:
+        if self.gains is None:
+            self.gains = self.requested.tuned(self.model, q_d, self.effort_limit)
+            g = self.gains
+            self._p, self._i, self._d = np.array(g.p), np.array(g.i), np.array(g.d)
+            with np.errstate(divide="ignore"):
+                self._i_bound = np.where(self._i > 0.0, np.array(g.i_clamp) / self._i, 0.0)
+        e = q_d - q
+        self.integral = np.clip(self.integral + self.period * e, -self._i_bound, self._i_bound)
+        return FeedbackOutput(du=self._p * e + self._i * self.integral + self._d * (qd_d - qd))
 
 
 class NoFeedback(FeedbackLaw):

@@ -32,10 +32,11 @@ from apc_core.robot import (
     with_inertia_error,
     with_payload,
 )
-from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
+from apc_feedback.baselines import PD, PID, ComputedTorque, NoFeedback, PdGains, PidGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
+from apc_plant_sim.effects import ArmEffects, PhysicalArm
 from apc_plant_sim.offline import RunResult, run_closed_loop
 from apc_plant_sim.plant import Plant, PlantConfig
 
@@ -45,7 +46,7 @@ CONFIG_DIR = REPO_ROOT / "config"
 PUMA_3DOF_URDF = CONFIG_DIR / "puma560_3dof.urdf"
 PAPER_JOINT_SIGN = np.array([1.0, -1.0, -1.0])
 PAPER_CASES = {"a": 0.0, "b": PAPER_MAX_PAYLOAD_KG / 2.0, "c": PAPER_MAX_PAYLOAD_KG}
-CONTROLLERS = ("adaptive", "computed_torque", "pd", "none")
+CONTROLLERS = ("adaptive", "computed_torque", "pd", "pid", "none")
 
 
 class ScenarioError(ValueError):
@@ -175,10 +176,10 @@ def build(scenario: Scenario) -> Built:
 def make_feedback(
     kind: str, controller_robot: Robot, period: float, params: Mapping[str, Any] | None = None
 ) -> FeedbackLaw:
-    """A feedback law by name: ``adaptive``, ``computed_torque``, ``pd`` or ``none``.
+    """A feedback law by name: ``adaptive``, ``computed_torque``, ``pd``, ``pid`` or ``none``.
 
     ``params`` are the law's settings (:class:`AdaptiveConfig` fields for ``adaptive``,
-    ``kp``/``kv`` for ``computed_torque`` and ``pd``).
+    ``kp``/``kv`` for ``computed_torque`` and ``pd``, :class:`PidGains` fields for ``pid``).
     """
     params = dict(params or {})
     model = controller_robot.model
@@ -189,6 +190,8 @@ def make_feedback(
         return ComputedTorque(model, PdGains.from_dict(params))
     if kind == "pd":
         return PD(model.nv, PdGains.from_dict(params))
+    if kind == "pid":
+        return PID(model, controller_robot.effort_limit, period, PidGains.from_dict(params))
     if kind == "none":
         if params:
             raise FeedbackError(f"controller 'none' takes no parameters, got {sorted(params)}")
@@ -201,13 +204,18 @@ def run_offline(
     controller: str,
     params: Mapping[str, Any] | None = None,
     n_samples: int | None = None,
+    effects: ArmEffects | None = None,
 ) -> RunResult:
-    """Build the scenario and run the closed loop without ROS."""
+    """Build the scenario and run the closed loop without ROS (on the ideal plant, or with
+    what a physical arm adds: :mod:`apc_plant_sim.effects`)."""
     built = build(scenario)
     q0, qd0, _ = built.trajectory.sample(0.0)
     pickup = payload_pickup_sample(scenario)
     initial = built.unloaded_robot if pickup else built.plant_robot
-    plant = Plant(initial, built.plant_config, q0, qd0)
+    if effects is None:
+        plant = Plant(initial, built.plant_config, q0, qd0)
+    else:
+        plant = PhysicalArm(initial, built.plant_config, effects, q0, qd0)
     feedforward = Feedforward(built.controller_robot.model, built.trajectory, scenario.period)
     feedback = make_feedback(controller, built.controller_robot, scenario.period, params)
     result = run_closed_loop(
