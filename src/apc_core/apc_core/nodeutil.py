@@ -5,9 +5,10 @@
 - :class:`Diagnostics` — counters and timing, published on ``/diagnostics`` at 1 Hz wall time.
 - :func:`run_node` — ``main`` for a node executable: ``--help``, one-line start-up errors with
   exit code 2, clean shutdown on SIGINT/SIGTERM (Jazzy: try/finally and ``try_shutdown``).
-- :func:`reject`, :func:`sample_index`, :func:`guarded` — the border: a bad message is counted
-  and logged (throttled), a stamp off the sample grid is refused, and an exception in a
-  callback is caught and counted instead of ending the node's spin.
+- :func:`reject`, :func:`guarded` — the border: a bad message is counted and logged
+  (throttled), and an exception in a callback is caught and counted instead of ending the
+  node's spin. :func:`apc_core.wire.sample_index` (re-exported here) refuses a stamp off the
+  sample grid.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from rclpy.node import Node
 from apc_core.params import ConfigError, Param
 from apc_core.robot import PAPER_GRAVITY_M_S2, Robot, RobotModelError, load_robot
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
+from apc_core.wire import sample_index as sample_index  # the nodes take it from here
 
 #: Where ``config/`` is in a source checkout (src/apc_core/apc_core/ -> repo root).
 _REPO_CONFIG = Path(__file__).resolve().parents[3] / "config"
@@ -203,24 +205,6 @@ def reject(node: Node, diagnostics: Diagnostics, topic: str, exc: Exception) -> 
     node.get_logger().warn(
         f"rejected message on '{topic}' ({n} so far): {exc}", throttle_duration_sec=1.0
     )
-
-
-def sample_index(stamp_ns: int, period_ns: int) -> int:
-    """The sample index ``k`` of a message stamped ``kT``.
-
-    Raises
-    ------
-    WireError
-        If the stamp is negative or not a whole multiple of the period: no node ever sent
-        such a sample (the plant stamps sample ``k`` exactly ``k * T``, ``k >= 0``).
-    """
-    if stamp_ns < 0:
-        raise WireError(f"header.stamp: {stamp_ns} ns is negative (samples are kT, k >= 0)")
-    if stamp_ns % period_ns:
-        raise WireError(
-            f"header.stamp: {stamp_ns} ns is not on the sample grid (a multiple of {period_ns} ns)"
-        )
-    return stamp_ns // period_ns
 
 
 def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable) -> Callable:

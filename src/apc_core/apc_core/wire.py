@@ -83,6 +83,7 @@ __all__ = [
     "msg_to_waypoints",
     "ns_to_duration",
     "ns_to_stamp",
+    "sample_index",
     "sample_stamp_ns",
     "seconds_to_ns",
     "setpoint_to_msg",
@@ -351,6 +352,24 @@ def sample_stamp_ns(k: int, period_ns: int) -> int:
     if period_ns <= 0:
         raise ValueError(f"period_ns must be > 0, got {period_ns}")
     return int(k) * int(period_ns)
+
+
+def sample_index(stamp_ns: int, period_ns: int) -> int:
+    """The sample index ``k`` of a message stamped ``kT`` (the inverse of :func:`sample_stamp_ns`).
+
+    Raises
+    ------
+    WireError
+        If the stamp is negative or not a whole multiple of the period: no node ever sent
+        such a sample (the plant stamps sample ``k`` exactly ``k * T``, ``k >= 0``).
+    """
+    if stamp_ns < 0:
+        raise WireError(f"header.stamp: {stamp_ns} ns is negative (samples are kT, k >= 0)")
+    if stamp_ns % period_ns:
+        raise WireError(
+            f"header.stamp: {stamp_ns} ns is not on the sample grid (a multiple of {period_ns} ns)"
+        )
+    return stamp_ns // period_ns
 
 
 # ----------------------------------------------------------------------------------------------

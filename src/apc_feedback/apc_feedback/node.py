@@ -41,12 +41,19 @@ from apc_core.nodeutil import (
     reject,
     robot_from_params,
     run_node,
-    sample_index,
 )
 from apc_core.params import ConfigError, Param, check_number, declare, subset
 from apc_core.robot import with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedback.sampling import (
+    Decision,
+    GridSampler,
+    JointStateSampler,
+    SamplePairer,
+    Step,
+    Verdict,
+)
 
 CONTROLLER_KINDS = ("adaptive", "computed_torque", "pd", "none")
 
@@ -158,27 +165,6 @@ PARAMS: tuple[Param, ...] = (
 RUNTIME_PARAMS: dict[str, Param] = {p.name: p for p in PARAMS if not p.read_only}
 #: Which family of runtime parameters each law uses.
 RUNTIME_FAMILY = {"adaptive": "adaptive.", "computed_torque": "gains.", "pd": "gains."}
-#: Samples waiting for their other half; beyond this the oldest is dropped (bounded memory).
-MAX_PENDING = 100
-#: Set points kept after use, to recognise a copy the feedforward sends again when the plant
-#: re-sends a joint state (lockstep): with the lookahead it can arrive samples later.
-RECENT_SETPOINTS = wire.MAX_LOOKAHEAD + 2
-
-
-def _same_setpoint(used: wire.Setpoint | None, other: wire.Setpoint) -> bool:
-    """Whether ``other`` is a bit-identical copy of the set point ``used`` for its sample."""
-    return (
-        used is not None
-        and used.time_from_start_ns == other.time_from_start_ns
-        and all(
-            np.array_equal(a, b)
-            for a, b in zip(
-                (used.q, used.qd, used.qdd, used.u_n),
-                (other.q, other.qd, other.qdd, other.u_n),
-                strict=True,
-            )
-        )
-    )
 
 
 def make_law(kind: str, values: dict[str, Any], model: Any) -> FeedbackLaw:
@@ -227,13 +213,12 @@ class FeedbackNode(Node):
         self.period_ns = wire.seconds_to_ns(values["period"])
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self.diagnostics.set("controller", self.kind)
-        self._states: dict[int, wire.JointSample] = {}
-        self._setpoints: dict[int, wire.Setpoint] = {}
-        self._used_setpoints: dict[int, wire.Setpoint] = {}
-        self._done: tuple[int, JointState, Float64MultiArray | None] | None = None
+        self.sampler: JointStateSampler = GridSampler(self.period_ns)
+        self.pairer = SamplePairer(self.period_ns)
+        #: The output published for the newest step, (stamp, torque, estimate): a resend's answer.
+        self._answer: tuple[int, JointState, Float64MultiArray | None] | None = None
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
-        self._started = False
         self._gain_updates: dict[str, float] = {}
 
         self.torque_pub = self.create_publisher(JointState, wire.FEEDBACK_TORQUE, qos)
@@ -295,104 +280,69 @@ class FeedbackNode(Node):
         self.get_logger().info(f"sample {k}: applying {changes}")
 
     # -- samples --------------------------------------------------------------------------------
-    def _hold(self, pending: dict[int, Any], stamp: int, item: Any, topic: str) -> bool:
-        """Keep one half of sample ``stamp`` until the other arrives; False for a duplicate."""
-        if stamp in pending:
-            self.diagnostics.count(f"duplicate.{topic}")  # the first one stands
-            return False
-        pending[stamp] = item
-        if len(pending) > MAX_PENDING:
-            del pending[min(pending)]
-            self.diagnostics.count(f"dropped.{topic}")
-        return True
-
-    def _stale(self, stamp: int, topic: str, setpoint: wire.Setpoint | None = None) -> bool:
-        """True if sample ``stamp`` is done: a re-sent joint state is answered from the cache,
-        a copy of a used set point is counted as re-sent, a different one as a duplicate (the
-        sample just done) or rejected (older)."""
-        if self._done is None or stamp > self._done[0]:
-            return False
-        if topic == wire.JOINT_STATES:
-            if stamp == self._done[0]:
-                # Re-sent sample: answer from the cache, never update the identifier twice.
-                self.diagnostics.count("resent")
-                self.torque_pub.publish(self._done[1])
-                if self._done[2] is not None:
-                    self.estimate_pub.publish(self._done[2])
-                return True
-        elif setpoint is not None and _same_setpoint(self._used_setpoints.get(stamp), setpoint):
-            self.diagnostics.count(f"resent.{topic}")
-            return True
-        elif stamp == self._done[0]:
-            self.diagnostics.count(f"duplicate.{topic}")  # the one used stands
-            return True
-        reject(self, self.diagnostics, topic, wire.WireError(f"stale stamp {stamp} ns"))
-        return True
-
     def _on_joint_state(self, msg: JointState) -> None:
         try:
-            sample = wire.joint_state_to_arrays(msg, self.joint_names)
-            sample_index(sample.stamp_ns, self.period_ns)
+            state = wire.joint_state_to_arrays(msg, self.joint_names)
+            sample = self.sampler.offer(state, self.get_clock().now().nanoseconds)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
-        if self._stale(sample.stamp_ns, wire.JOINT_STATES):
-            return
-        if self._hold(self._states, sample.stamp_ns, sample, wire.JOINT_STATES):
-            self._try(sample.stamp_ns)
+        if sample is not None:
+            self._decided(wire.JOINT_STATES, self.pairer.offer_state(sample))
 
     def _on_setpoint(self, msg: JointTrajectory) -> None:
         try:
             setpoint = wire.msg_to_setpoint(msg, self.joint_names)
-            sample_index(setpoint.stamp_ns, self.period_ns)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.SETPOINT, exc)
             return
-        if self._stale(setpoint.stamp_ns, wire.SETPOINT, setpoint):
-            return
-        if self._hold(self._setpoints, setpoint.stamp_ns, setpoint, wire.SETPOINT):
-            self._try(setpoint.stamp_ns)
+        self._decided(wire.SETPOINT, self.pairer.offer_setpoint(setpoint))
 
-    def _try(self, stamp: int) -> None:
-        state, setpoint = self._states.get(stamp), self._setpoints.get(stamp)
-        if state is None or setpoint is None:
-            return
-        # Everything older than this sample can no longer be completed.
-        for pending in (self._states, self._setpoints):
-            for old in [s for s in pending if s <= stamp]:
-                del pending[old]
-        used = self._used_setpoints
-        used[stamp] = setpoint
-        if len(used) > RECENT_SETPOINTS:
-            del used[min(used)]
-        k = stamp // self.period_ns
+    def _decided(self, topic: str, decision: Decision) -> None:
+        """Count, log or publish what the pairer decided about a message on ``topic``."""
+        if decision.dropped:
+            self.diagnostics.count(f"dropped.{topic}")
+        verdict = decision.verdict
+        if verdict is Verdict.STEP:
+            self._step(decision.step)
+        elif verdict is Verdict.RESENT:
+            # Answered with the output already published for that sample, if there was one.
+            self.diagnostics.count("resent")
+            if self._answer is not None and self._answer[0] == self.pairer.done_ns:
+                _, torque, estimate = self._answer
+                self.torque_pub.publish(torque)
+                if estimate is not None:
+                    self.estimate_pub.publish(estimate)
+        elif verdict is Verdict.COPY:
+            self.diagnostics.count(f"resent.{topic}")
+        elif verdict is Verdict.DUPLICATE:
+            self.diagnostics.count(f"duplicate.{topic}")
+        elif verdict is Verdict.REJECTED:
+            reject(self, self.diagnostics, topic, wire.WireError(decision.reason))
+
+    def _step(self, step: Step) -> None:
+        stamp, state, setpoint = step.stamp_ns, step.state, step.setpoint
         if self._gain_updates:
-            self._apply_gain_updates(k)
+            self._apply_gain_updates(step.k)
         with Stopwatch(self.diagnostics, "compute"):
-            applied = state.effort if (self._started and state.effort is not None) else None
             try:
                 out = self.law.update(
-                    k,
+                    step.k,
                     state.position,
                     state.velocity,
                     setpoint.q,
                     setpoint.qd,
                     setpoint.qdd,
                     setpoint.u_n,
-                    applied,
+                    step.applied,
                 )
-            except (FeedbackError, ValueError) as exc:
-                reject(self, self.diagnostics, "feedback_law", exc)
-                return
-            try:
                 # Refuses du that is not finite or beyond the wire's bound: nothing is
                 # published, the plant's watchdog / lockstep timeout takes over.
                 torque = wire.torque_to_msg(stamp, self.joint_names, out.du, self._torque_msg)
-            except wire.WireError as exc:
+            except (FeedbackError, ValueError) as exc:  # WireError is a ValueError
                 reject(self, self.diagnostics, "feedback_law", exc)
                 return
         # The torque first: the plant waits for it, the telemetry can follow.
-        self._started = True
         self.torque_pub.publish(torque)
         estimate = None
         rls = getattr(self.law, "rls", None)
@@ -419,7 +369,7 @@ class FeedbackNode(Node):
                     reject(self, self.diagnostics, "estimate", exc)
                 else:
                     self.estimate_pub.publish(estimate)
-        self._done = (stamp, torque, estimate)
+        self._answer = (stamp, torque, estimate)
         self.diagnostics.count("samples")
 
 
