@@ -1,0 +1,264 @@
+"""Robot mode's loop with synthetic time: pairing, starts, command, clipping, faults; and the
+whole loop closed offline around apc's plant as a 400 Hz driver with no velocity."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
+from apc_core.wire import JointSample, Setpoint
+from apc_feedback.baselines import PD, PdGains
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+from apc_feedback.robot_loop import CommandMap, RobotLoop
+from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedforward.nominal import Feedforward
+from apc_feedforward.trajectory import FourThreeFour, Quintic
+from apc_plant_sim.plant import Plant, PlantConfig
+from apc_plant_sim.scenario import CONFIG_DIR, recommended_settings
+
+MS = 1_000_000
+T = 10 * MS
+NAMES = ("a", "b")
+
+
+def _setpoint(k, q, qd=0.0, u_n=0.0):
+    v = np.full(2, 1.0)
+    return Setpoint(k * T, q * v, qd * v, 0.0 * v, u_n * v, 0)
+
+
+def _state(stamp, q, qd=0.0):
+    return JointSample(stamp, np.full(2, float(q)), np.full(2, float(qd)), None)
+
+
+def _loop(tolerance=0.0, limit=(100.0, 100.0), command_joints=("b", "a")):
+    counts: Counter = Counter()
+    logs: list = []
+    loop = RobotLoop(
+        law=PD(2, PdGains(kp=100.0, kv=0.0)),
+        sampling=RobotSamplingConfig(period=0.01, max_age=0.02, watchdog=0.05),
+        command=CommandMap(NAMES, command_joints, np.array(limit)),
+        gravity=lambda q: np.array([1.0, 2.0]),
+        path_tolerance=np.full(2, tolerance),
+        count=lambda name: counts.update([name]),
+        log=lambda level, text: logs.append((level, text)),
+    )
+    return loop, counts, logs
+
+
+def test_command_map_orders_and_clips_per_joint():
+    m = CommandMap(("a", "b", "c"), ("c", "a", "b"), np.array([1.0, 2.0, 3.0]))
+    row = m(np.array([5.0, -1.0, -4.0]))
+    assert row.tolist() == [-3.0, 1.0, -1.0]
+    assert m.clipped == {"c": 1, "a": 1, "b": 0}
+    assert m.to_model(row).tolist() == [1.0, -1.0, -3.0]
+    with pytest.raises(ValueError, match="command_joints"):
+        CommandMap(("a", "b"), ("a", "x"), np.ones(2))
+
+
+def test_activation_is_a_start_and_the_law_runs_when_its_setpoint_arrives():
+    loop, counts, _ = _loop()
+    t = 100 * T + 2 * MS
+    loop.on_joint_state(_state(t - MS, 0.3), t)
+    loop.activate(t)
+    step = loop.tick(t)
+    assert step.start and step.sample.stamp_ns == 100 * T and step.command is None
+    # a set point from the plan before the start is dropped, the flagged one is used
+    assert loop.on_setpoint(_setpoint(100, 9.0), start=False).command is None
+    assert counts["superseded_setpoints"] == 1
+    step = loop.on_setpoint(_setpoint(100, 0.3, u_n=1.5), start=True)
+    assert step.command.tolist() == [1.5, 1.5] and step.sample is None
+    # set point 101 is in hand before tick 101: the command goes out at the tick
+    assert loop.on_setpoint(_setpoint(101, 0.4, u_n=1.0), start=False) == (None, False, None)
+    loop.on_joint_state(_state(t + 5 * MS, 0.3), t + 5 * MS)
+    step = loop.tick(t + T)
+    assert not step.start and step.sample.stamp_ns == 101 * T
+    assert step.command == pytest.approx([1.0 + 10.0, 1.0 + 10.0])  # kp * 0.1
+
+
+def test_a_tick_without_a_new_state_takes_no_sample_and_the_law_skips_across_the_gap():
+    law_calls = []
+    loop, counts, _ = _loop()
+    update = loop.law.update
+    loop.law.update = lambda k, *a: law_calls.append(k) or update(k, *a)
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.activate(t)
+    loop.tick(t)
+    loop.on_setpoint(_setpoint(100, 0.0), start=True)
+    for k in (101, 102, 103):
+        loop.on_setpoint(_setpoint(k, 0.0), start=False)
+    assert loop.tick(t + T) == (None, False, None)  # no new state
+    assert counts["no_new_state"] == 1
+    loop.on_joint_state(_state(t + T + MS, 0.0), t + T + MS)
+    assert loop.tick(t + 2 * T).command is not None
+    assert law_calls == [100, 102]
+
+
+def test_late_duplicate_and_missing_setpoints_are_counted():
+    loop, counts, _ = _loop()
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.activate(t)
+    loop.tick(t)
+    loop.on_setpoint(_setpoint(100, 0.0), start=True)
+    loop.on_setpoint(_setpoint(102, 0.0), start=False)
+    loop.on_setpoint(_setpoint(102, 1.0), start=False)
+    assert counts["duplicate_setpoints"] == 1
+    loop.on_setpoint(_setpoint(100, 0.0), start=False)
+    assert counts["late_setpoints"] == 1
+    loop.on_joint_state(_state(t + T, 0.0), t + T)
+    assert loop.tick(t + T).command is None  # set point 101 not here yet
+    loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
+    assert loop.tick(t + 2 * T).command is not None
+    assert counts["missed_setpoint"] == 1
+    loop.on_setpoint(_setpoint(101, 0.0), start=False)
+    assert counts["late_setpoints"] == 2
+
+
+def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fresh_states():
+    loop, counts, logs = _loop()
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.2), t)
+    loop.activate(t)
+    loop.tick(t)
+    loop.on_setpoint(_setpoint(100, 0.2), start=True)
+    step = loop.tick(t + 6 * T)  # 60 ms without a state, watchdog 50 ms
+    assert step.command.tolist() == [2.0, 1.0]  # gravity, in command order (b, a)
+    assert counts["watchdog"] == 1 and logs[-1][0] == "error"
+    assert loop.tick(t + 7 * T) == (None, False, None)
+    loop.on_joint_state(_state(t + 8 * T, 0.5), t + 8 * T)
+    step = loop.tick(t + 8 * T)
+    assert step.start and step.sample.position[0] == 0.5
+    assert counts["watchdog_recovered"] == 1 and counts["starts"] == 2
+
+
+def test_waiting_for_the_first_state_is_not_a_fault():
+    loop, counts, _ = _loop()
+    loop.activate(100 * T)
+    assert loop.tick(100 * T) == (None, False, None)
+    assert counts["no_state"] == 1 and counts["watchdog"] == 0
+
+
+def test_path_tolerance_aborts_a_moving_setpoint_and_restarts_at_the_measured_position():
+    loop, counts, logs = _loop(tolerance=0.1)
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.activate(t)
+    loop.tick(t)
+    loop.on_setpoint(_setpoint(100, 0.0), start=True)
+    loop.on_setpoint(_setpoint(101, 0.05, qd=1.0), start=False)  # within tolerance
+    loop.on_joint_state(_state(t + T, 0.0), t + T)
+    assert loop.tick(t + T).command is not None
+    # a held (still) set point far away is no path violation; a moving one is
+    loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
+    loop.tick(t + 2 * T)
+    step = loop.on_setpoint(_setpoint(102, 0.3, qd=1.0), start=False)
+    assert step.start and step.sample.stamp_ns == 102 * T and step.command is None
+    assert counts["path_tolerance_aborts"] == 1
+    assert "joint 'a'" in logs[-1][1]
+    assert loop.on_setpoint(_setpoint(102, 0.0), start=True).command is not None
+
+
+def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
+    loop, _, _ = _loop()
+    assert loop.deactivate() is None  # never measured: nothing to hold
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.activate(t)
+    loop.tick(t)
+    assert loop.deactivate().tolist() == [2.0, 1.0]
+    assert loop.tick(t + T) == (None, False, None)
+    assert loop.on_setpoint(_setpoint(100, 0.0), start=True) == (None, False, None)
+
+
+# -- the loop closed offline ---------------------------------------------------------------------
+def _closed_loop(duration_s, goal_deg=None, driver_ms=2.0, phase_ms=0.3, payload_kg=2.268):
+    """A 500 Hz driver (apc's plant stepping every ``driver_ms``, positions only), the loop
+    ticking every T with a phase, and a feedforward answering with lookahead 1 (sim time)."""
+    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
+    plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
+    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    dt = int(driver_ms * MS)
+    plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
+    data = controller.model.createData()
+    settings = dict(recommended_settings(), period=0.01)
+    loop = RobotLoop(
+        law=AdaptiveFeedback(controller.model, AdaptiveConfig.from_dict(settings)),
+        sampling=RobotSamplingConfig(),
+        command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
+        gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
+        path_tolerance=np.full(3, 0.2),
+    )
+    ff: list = []  # [Feedforward, next k]
+    log = []
+    # Before activation another controller holds the arm (the true gravity torque).
+    torque = pin.computeGeneralizedGravity(plant_robot.model, plant_robot.model.createData(), q0)
+
+    def feedforward(sample, start):
+        if start:
+            hold = Quintic(sample.position, sample.position, 0.01)
+            ff[:] = [Feedforward(controller.model, hold, 0.01, sample.stamp_ns // T), None]
+            if goal_deg is not None:
+                move = FourThreeFour(sample.position, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
+                ff[0].set_trajectory(move, sample.stamp_ns // T + 20)
+        k = sample.stamp_ns // T
+        first = k if start else max(ff[1], k)
+        steps = []
+        for j in range(first, k + 2):
+            sp = ff[0].sample(j)
+            steps.append(
+                loop.on_setpoint(
+                    Setpoint(j * T, sp.q, sp.qd, sp.qdd, sp.u_n, 0), start=start and j == k
+                )
+            )
+        ff[1] = k + 2
+        return steps
+
+    def handle(step):
+        nonlocal torque
+        if step.command is not None:
+            torque = loop.command.to_model(step.command)
+        if step.sample is not None:
+            for s in feedforward(step.sample, step.start):
+                handle(s)
+
+    t_act = 5000 * T + int(phase_ms * MS)
+    t_driver, t_tick = 5000 * T - 40 * MS, t_act
+    end = t_act + int(duration_s * 1e9)
+    activated = False
+    while min(t_driver, t_tick) < end:
+        if t_driver <= t_tick:
+            loop.on_joint_state(JointSample(t_driver, plant.q.copy(), None, None), t_driver)
+            log.append((t_driver, plant.q.copy()))
+            plant.step(torque)
+            t_driver += dt
+        else:
+            if not activated:
+                loop.activate(t_tick)
+                activated = True
+            handle(loop.tick(t_tick))
+            if ff:
+                sp = ff[0].sample(t_tick // T)
+                log[-1] = (*log[-1][:2], sp.q)
+            t_tick += T
+    return q0, log
+
+
+def test_closed_loop_holds_without_jump_or_sag_under_an_unknown_payload():
+    q0, log = _closed_loop(1.5)
+    q = np.array([entry[1] for entry in log])
+    assert np.rad2deg(np.max(np.abs(q - q0))) < 0.5
+    assert np.rad2deg(np.max(np.abs(q[-1] - q0))) < 0.05
+
+
+def test_closed_loop_tracks_the_papers_move_from_the_measured_position():
+    _, log = _closed_loop(2.0, goal_deg=(90.0, 45.0, -135.0))
+    final = log[-1][1]
+    assert np.rad2deg(np.max(np.abs(final - np.deg2rad([90.0, 45.0, -135.0])))) < 0.5
+    errors = [np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in log if len(e) == 3]
+    assert max(errors) < 1.0
