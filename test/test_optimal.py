@@ -9,10 +9,8 @@ from scipy.optimize import minimize
 from apc_feedback.optimal import (
     ControlError,
     OneStepControl,
-    closed_loop_eigenvalues,
     one_step_control,
     one_step_cost,
-    one_step_gain,
     validate_weights,
 )
 
@@ -99,32 +97,9 @@ def test_scalar_case_by_hand(f: float, g: float, w: float, q: float, r: float, x
     u = one_step_control(*args)
     assert u.shape == (1,)
     assert u[0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
-    K, L = one_step_gain([[f]], [[g]], [[q]], [[r]])
-    assert K[0, 0] == pytest.approx(g * q * f / (r + g * g * q), rel=1e-12, abs=1e-15)
-    assert L[0, 0] == pytest.approx(g * q / (r + g * g * q), rel=1e-12, abs=1e-15)
     # The printed Eq. 35: -g q f (x + w) / (r + g² q).
     printed = one_step_control(*args, form="printed")
     assert printed[0] == pytest.approx(-g * q * f * (x + w) / (r + g * g * q), rel=1e-12, abs=1e-15)
-
-
-@pytest.mark.parametrize("n", [1, 3])
-def test_gain_reproduces_control(n: int) -> None:
-    rng = np.random.default_rng(11 + n)
-    pb = random_problem(rng, n)
-    K, L = one_step_gain(pb["F"], pb["G"], pb["Q"], pb["R"])
-    assert K.shape == (n, 2 * n)
-    assert L.shape == (n, 2 * n)
-    np.testing.assert_allclose(
-        one_step_control(**pb), -(K @ pb["x"] + L @ pb["w"]), rtol=1e-10, atol=1e-12
-    )
-    np.testing.assert_allclose(
-        one_step_control(**pb, form="printed"),
-        -K @ (pb["x"] + pb["w"]),
-        rtol=1e-10,
-        atol=1e-12,
-    )
-    # K = L F by definition.
-    np.testing.assert_allclose(K, L @ pb["F"], rtol=1e-10, atol=1e-12)
 
 
 def test_paper_weights_on_paper_sized_model() -> None:
@@ -167,28 +142,6 @@ def test_printed_form_differs_only_with_bias_and_non_identity_F() -> None:
         rtol=1e-12,
         atol=1e-14,
     )
-
-
-# ----------------------------------------------------------------------------------- diagnostics
-def test_closed_loop_eigenvalues() -> None:
-    rng = np.random.default_rng(14)
-    pb = random_problem(rng, 2)
-    K, _ = one_step_gain(pb["F"], pb["G"], pb["Q"], pb["R"])
-    eig = closed_loop_eigenvalues(pb["F"], pb["G"], K)
-    assert eig.shape == (4,)
-    assert np.iscomplexobj(eig)
-    np.testing.assert_allclose(
-        np.sort_complex(eig),
-        np.sort_complex(np.linalg.eigvals(pb["F"] - pb["G"] @ K)),
-        rtol=1e-12,
-    )
-    # Scalar: f - g k.
-    f, g, q, r = 1.1, 0.5, 1.0, 0.01
-    k = g * q * f / (r + g * g * q)
-    eig1 = closed_loop_eigenvalues([[f]], [[g]], [[k]])
-    assert eig1[0] == pytest.approx(f - g * k)
-    with pytest.raises(ControlError, match="K"):
-        closed_loop_eigenvalues(pb["F"], pb["G"], K.T)
 
 
 def test_one_step_cost_value() -> None:
@@ -236,9 +189,6 @@ def test_bad_arguments_raise_control_error(change: dict, message: str) -> None:
     pb = {**_base(), **change}
     with pytest.raises(ControlError, match=message):
         one_step_control(**pb)
-    if not ({"w", "x"} & change.keys()):
-        with pytest.raises(ControlError, match=message):
-            one_step_gain(pb["F"], pb["G"], pb["Q"], pb["R"])
 
 
 def test_bad_form_and_unchecked_weights() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_feedback.rls import Rls, RlsConfig, RlsError, RlsStep
+from apc_feedback.rls import Rls, RlsConfig, RlsError, RlsStep, rls_update_reference
 
 N = 3  # joints
 P_DIM = 2 * N  # state
@@ -164,6 +164,44 @@ def test_printed_update_equals_unforgetting_batch_least_squares() -> None:
     )
     np.testing.assert_allclose(rls.theta, theta_b, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(rls.P, P_b, rtol=1e-9, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------------- reference
+@pytest.mark.parametrize(
+    "config",
+    [
+        RlsConfig(rho=0.95, alpha=50.0),
+        RlsConfig(rho=0.8, alpha=50.0, forgetting="printed"),
+        RlsConfig(rho=0.9, alpha=50.0, trace_max=20.0),
+    ],
+    ids=["exponential", "printed", "guarded"],
+)
+def test_fast_update_equals_the_paper_written_reference(config: RlsConfig) -> None:
+    # Rls.update computes all columns in stacked buffers; rls_update_reference writes Eqs.
+    # 26, 29-31 column by column. Noisy exciting data, then a still stretch that winds P up
+    # (and, guarded, makes the guard act), then exciting data again.
+    rng = np.random.default_rng(11)
+    F, G, w = random_system(rng)
+    F0, G0, w0 = random_system(rng)
+    rls = Rls(N, config)
+    rls.reset(F0, G0, w0)
+    theta, P = theta_of(F0, G0, w0), config.alpha * np.eye(M)
+    still = Rls.regressor(np.full(P_DIM, 0.2), np.full(N, -0.1))
+    data = exciting_data(rng, F, G, w, 120)
+    data[40:80] = [(still, F @ still[:P_DIM] + G @ still[P_DIM:-1] + w)] * 40
+    clipped = 0
+    for z, x in data:
+        x = x + 0.05 * rng.standard_normal(P_DIM)
+        step = rls.update(z, x)
+        theta, P, expected = rls_update_reference(theta, P, z, x, config)
+        np.testing.assert_allclose(rls.theta, theta, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(rls.P, P, rtol=1e-9, atol=1e-9 * np.max(np.abs(P)))
+        np.testing.assert_allclose(step.residual, expected.residual, rtol=1e-9, atol=1e-9)
+        assert step.gamma == pytest.approx(expected.gamma, rel=1e-9)
+        assert step.trace_p == pytest.approx(expected.trace_p, rel=1e-9)
+        assert step.clipped == expected.clipped
+        clipped += step.clipped
+    assert (clipped > 0) == (config.trace_max is not None)
 
 
 # ----------------------------------------------------------------------------------- forgetting

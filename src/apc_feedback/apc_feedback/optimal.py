@@ -14,11 +14,14 @@ unique because ``R ≻ 0`` and ``Q ⪰ 0`` make ``R + Gᵀ Q G ≻ 0``. The pape
 
     u  = -(R + Gᵀ Q G)⁻¹ Gᵀ Q F (x + w)            (Eq. 35 as printed, ``form="printed"``)
 
-which applies ``F`` to the bias as well; the two agree when ``w = 0`` or ``F = I``. See
-``/work/shared/DESIGN.md``, "Where the printed paper is wrong".
+which applies ``F`` to the bias as well; the two agree when ``w = 0`` or ``F = I``. The
+printed form stays selectable to reproduce the paper as written.
 
-The linear system is solved (``numpy.linalg.solve``, or LAPACK's Cholesky solver ``dposv`` in
-the per-sample :class:`OneStepControl`), never inverted. No ROS here.
+:func:`one_step_control` writes Eq. 35 as above, for any ``Q`` and ``R``, and is the readable
+reference; :class:`OneStepControl` computes the same ``u*`` every sample for a diagonal ``Q``
+from preallocated buffers, and the tests hold the two equal. The linear system is solved
+(``numpy.linalg.solve``, or LAPACK's Cholesky solver ``dposv`` in :class:`OneStepControl`),
+never inverted. No ROS here.
 """
 
 from __future__ import annotations
@@ -32,10 +35,8 @@ from scipy.linalg import lapack
 __all__ = [
     "ControlError",
     "OneStepControl",
-    "closed_loop_eigenvalues",
     "one_step_control",
     "one_step_cost",
-    "one_step_gain",
     "receding_horizon_control",
     "validate_weights",
 ]
@@ -144,55 +145,6 @@ def _solve_spd(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------- public API
-def one_step_gain(
-    F: Any, G: Any, Q: Any, R: Any, *, check_weights: bool = True
-) -> tuple[np.ndarray, np.ndarray]:
-    """Gains of the one-step optimal control (Eq. 35, corrected).
-
-    With ``S = R + Gᵀ Q G``::
-
-        K = S⁻¹ Gᵀ Q F      (n, p)
-        L = S⁻¹ Gᵀ Q        (n, p)
-
-    so that the exact minimiser of Eq. 34 is ``u* = -(K x + L w)``. The printed Eq. 35 is
-    ``u = -K (x + w)`` (``L`` replaced by ``K``). ``S`` is factorised once for both
-    (``numpy.linalg.solve`` with the stacked right-hand side ``Gᵀ Q [F I]``).
-
-    Parameters
-    ----------
-    F : array_like, shape (p, p)
-        F̂ of Eq. 16.
-    G : array_like, shape (p, n)
-        Ĝ of Eq. 16.
-    Q : array_like, shape (p, p)
-        Symmetric positive semidefinite state weight of Eq. 34.
-    R : array_like, shape (n, n)
-        Symmetric positive definite input weight of Eq. 34.
-    check_weights : bool, keyword-only
-        Validate ``Q`` and ``R`` (default). Pass False in a hot loop only after checking them
-        once with :func:`validate_weights`.
-
-    Returns
-    -------
-    K : numpy.ndarray, shape (n, p)
-    L : numpy.ndarray, shape (n, p)
-
-    Raises
-    ------
-    ControlError
-        On wrong shapes, non-finite entries, ``Q`` not symmetric PSD, ``R`` not symmetric
-        positive definite, or ``R + Gᵀ Q G`` numerically singular.
-    """
-    Fa, Ga, p, n = _model(F, G)
-    Qa, Ra = _weights(Q, R, p, n, check_weights)
-    GtQ = Ga.T @ Qa
-    rhs = np.empty((n, 2 * p))
-    rhs[:, :p] = GtQ @ Fa
-    rhs[:, p:] = GtQ
-    X = _solve_spd(Ra + GtQ @ Ga, rhs)
-    return X[:, :p].copy(), X[:, p:].copy()
-
-
 def one_step_control(
     F: Any,
     G: Any,
@@ -227,7 +179,8 @@ def one_step_control(
         Current perturbation state δx(k) = x(k) - x_n(k).
     form : {"exact", "printed"}
     check_weights : bool, keyword-only
-        See :func:`one_step_gain`.
+        Validate ``Q`` and ``R`` (default). Pass False in a hot loop only after checking them
+        once with :func:`validate_weights`.
 
     Returns
     -------
@@ -237,7 +190,8 @@ def one_step_control(
     Raises
     ------
     ControlError
-        As :func:`one_step_gain`; also on a bad ``w``, ``x`` or ``form``.
+        On wrong shapes, non-finite entries, ``Q`` not symmetric PSD, ``R`` not symmetric
+        positive definite, ``R + Gᵀ Q G`` numerically singular, or a bad ``form``.
     """
     if form not in _FORMS:
         raise ControlError(f"form must be one of {', '.join(_FORMS)}, got {form!r}")
@@ -245,9 +199,9 @@ def one_step_control(
     wa = _array("w", w, (p,))
     xa = _array("x", x, (p,))
     Qa, Ra = _weights(Q, R, p, n, check_weights)
-    y = Fa @ xa + wa if form == "exact" else Fa @ (xa + wa)
+    y = Fa @ xa + wa if form == "exact" else Fa @ (xa + wa)  # F x + w, or F (x + w) as printed
     GtQ = Ga.T @ Qa
-    return -_solve_spd(Ra + GtQ @ Ga, GtQ @ y)
+    return -_solve_spd(Ra + GtQ @ Ga, GtQ @ y)  # -(R + Gᵀ Q G)⁻¹ Gᵀ Q y (Eq. 35)
 
 
 class OneStepControl:
@@ -304,51 +258,26 @@ class OneStepControl:
             If ``R + Gᵀ Q G`` is not numerically positive definite or the result is not
             finite.
         """
+        # Each line names the term of Eq. 35 it computes; model_t = Θᵀ = [F G w].
         p, xa = self.p, self._xa
         if self.exact:
-            self._xa_x[:] = x  # (x, 0, 1): F x + w
+            self._xa_x[:] = x  # xa = (x, 0, 1), so Θᵀ xa = F x + w (Eq. 35 corrected)
             xa[-1] = 1.0
         else:
-            np.add(x, model_t[:, -1], out=self._xa_x)  # (x + w, 0, 0): F (x + w)
+            np.add(x, model_t[:, -1], out=self._xa_x)  # xa = (x + w, 0, 0): F (x + w), as printed
             xa[-1] = 0.0
-        np.dot(model_t, xa, out=self._y)
-        G = model_t[:, p : p + self.n]
-        gtq = np.multiply(G.T, self.q_diagonal, out=self._gtq)  # Gᵀ Q for diagonal Q
-        S = np.dot(gtq, G, out=self._S)
-        S += self.R
-        np.dot(gtq, self._y, out=self._b)
-        _, u, info = lapack.dposv(S, self._b)
+        np.dot(model_t, xa, out=self._y)  # y = F x + w (or F (x + w))
+        G = model_t[:, p : p + self.n]  # Ĝ
+        gtq = np.multiply(G.T, self.q_diagonal, out=self._gtq)  # Gᵀ Q (Q diagonal)
+        S = np.dot(gtq, G, out=self._S)  # Gᵀ Q G
+        S += self.R  # S = R + Gᵀ Q G
+        np.dot(gtq, self._y, out=self._b)  # b = Gᵀ Q y
+        _, u, info = lapack.dposv(S, self._b)  # u = S⁻¹ b, by Cholesky of S
         if info != 0:
             raise ControlError("R + Gᵀ Q G is not positive definite (check R)")
         if not math.isfinite(float(np.add.reduce(u))):
             raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
-        return np.negative(u, out=u)
-
-
-def closed_loop_eigenvalues(F: Any, G: Any, K: Any) -> np.ndarray:
-    """Eigenvalues of ``F - G K``, the closed loop of Eq. 16 under ``u = -K x``.
-
-    A diagnostic, like the ``E`` returned by python-control's ``dlqr``: the one-step controller
-    alone does not guarantee ``|λ| < 1``.
-
-    Parameters
-    ----------
-    F : array_like, shape (p, p)
-    G : array_like, shape (p, n)
-    K : array_like, shape (n, p)
-
-    Returns
-    -------
-    numpy.ndarray, shape (p,), complex
-
-    Raises
-    ------
-    ControlError
-        On wrong shapes or non-finite entries.
-    """
-    Fa, Ga, p, n = _model(F, G)
-    Ka = _array("K", K, (n, p))
-    return np.linalg.eigvals(Fa - Ga @ Ka).astype(complex)
+        return np.negative(u, out=u)  # u* = -S⁻¹ Gᵀ Q y (Eq. 35)
 
 
 def one_step_cost(F: Any, G: Any, w: Any, Q: Any, R: Any, x: Any, u: Any) -> float:

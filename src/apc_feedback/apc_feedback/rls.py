@@ -7,8 +7,7 @@ The discrete perturbation model of Eq. 16 is
 With the regressor ``z(k) = (δx(k), δu(k), 1) ∈ R^(3n+1)`` (Eq. 23) and the parameter matrix
 ``Θ = [F G w]ᵀ ∈ R^((3n+1)×p)`` (Eq. 22) this reads ``δx(k+1) = Θᵀ z(k)`` (Eq. 25). All ``p``
 columns of Θ share one regressor, so one gain matrix ``P`` serves them all and is updated once
-per sample (the paper's remark after Eq. 35). One update (Eqs. 26, 29-31, with Eq. 30 corrected,
-see ``/work/shared/DESIGN.md``):
+per sample (the paper's remark after Eq. 35). One update (Eqs. 26, 29-31):
 
     e     = δx(k+1) - Θᵀ z                       (Eq. 26, a-priori residual, (p,))
     γ     = 1 / (zᵀ P z + ρ)                      (Eq. 31)
@@ -16,10 +15,16 @@ see ``/work/shared/DESIGN.md``):
     P    ← (P - γ P z zᵀ P) / ρ                   (Eq. 30 corrected, ``forgetting="exponential"``)
     P    ←  P - γ P z zᵀ P                        (Eq. 30 as printed, ``forgetting="printed"``)
 
-``P(0) = α I`` (Eq. 32). The corrected form is exponentially weighted least squares: after k
-updates ``P(k)⁻¹ = ρᵏ P(0)⁻¹ + Σᵢ ρ^(k-1-i) z(i) z(i)ᵀ``. The printed form gives
-``P(k)⁻¹ = P(0)⁻¹ + ρ⁻¹ Σᵢ z(i) z(i)ᵀ``: every sample is weighted alike and nothing is
-forgotten, whatever ρ.
+``P(0) = α I`` (Eq. 32). Eq. 30 as printed omits the division by ρ that minimising the
+exponentially weighted criterion of Eq. 27 yields. With it, after k updates
+``P(k)⁻¹ = ρᵏ P(0)⁻¹ + Σᵢ ρ^(k-1-i) z(i) z(i)ᵀ``: old samples fade by ρ per step. The printed
+form gives ``P(k)⁻¹ = P(0)⁻¹ + ρ⁻¹ Σᵢ z(i) z(i)ᵀ``: every sample is weighted alike and nothing
+is forgotten, whatever ρ. The corrected form is the default; the printed one stays selectable
+to reproduce the paper as written.
+
+:func:`rls_update_reference` writes one update as the paper does, column by column (Eq. 29 for
+each ``θᵢ``) with fresh arrays; :class:`Rls` computes the same update for all columns at once
+in preallocated buffers, and the tests hold the two equal.
 
 Wind-up guard: when the data do not excite every direction of ``z`` (the arm holding still,
 ``δu`` constant) the exponential form divides the unexcited part of ``P`` by ρ at every sample,
@@ -44,7 +49,7 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
-__all__ = ["Rls", "RlsConfig", "RlsError", "RlsStep"]
+__all__ = ["Rls", "RlsConfig", "RlsError", "RlsStep", "rls_update_reference"]
 
 Forgetting = Literal["exponential", "printed"]
 _FORGETTING: tuple[str, ...] = ("exponential", "printed")
@@ -422,34 +427,35 @@ class Rls:
         makes the candidate non-finite, and only then are the inputs examined to name the
         culprit. One reduction over the candidate replaces a check per array.
         """
-        rho = self._config.rho
+        # Each line names the term of Eqs. 26, 29-31 it computes; the state buffer holds
+        # [P; Θᵀ] stacked, so a row of the Θᵀ block is one θᵢᵀ of Eq. 21.
+        rho = self._config.rho  # ρ
         now, new = self._views[self._cur], self._views[1 - self._cur]
         r = self._r
-        np.dot(now.stacked, z, out=r)  # [P z; Θᵀ z]
-        pz = self._pz
-        denom = float(np.dot(z, pz)) + rho
+        np.dot(now.stacked, z, out=r)  # [P z; Θᵀ z]: Θᵀ z is Eq. 25's prediction of δx(k+1)
+        pz = self._pz  # P z, the gain direction shared by every θᵢ (Eqs. 29-30)
+        denom = float(np.dot(z, pz)) + rho  # zᵀ P z + ρ (Eq. 31)
         if not (denom > 0.0 and math.isfinite(denom)):
             _name_non_finite(z, dx_next)
             raise RlsError(f"update rejected: zᵀ P z + rho = {denom!r} (z too large?)")
-        gamma = 1.0 / denom
-        np.subtract(self._theta_z, dx_next, out=self._theta_z)  # -e, Eq. 26
-        # [P; Θᵀ] - γ [P z; -e] (P z)ᵀ: Eq. 30's P - γ (P z)(P z)ᵀ (P zzᵀ P = (P z)(P z)ᵀ for
-        # symmetric P) and Eq. 29's Θᵀ + γ e (P z)ᵀ in one pass. The P block is built
-        # elementwise from exactly symmetric arrays, so it stays exactly symmetric.
+        gamma = 1.0 / denom  # γ (Eq. 31)
+        np.subtract(self._theta_z, dx_next, out=self._theta_z)  # -e = Θᵀ z - δx(k+1) (Eq. 26)
         stacked = new.stacked
-        np.multiply.outer(r, pz, out=stacked)
-        stacked *= -gamma
-        stacked += now.stacked
-        # Forgetting (Eq. 30 corrected) and the wind-up guard as one scaling of P.
-        trace_p = float(_sum(new.diagonal))
-        scale = 1.0 / rho if self._exponential else 1.0
+        # P zzᵀ P = (P z)(P z)ᵀ for symmetric P, so one outer product of [P z; -e] with P z
+        # serves both updates. The P block is built elementwise from exactly symmetric arrays,
+        # so it stays exactly symmetric.
+        np.multiply.outer(r, pz, out=stacked)  # [P z zᵀ P; -e (P z)ᵀ]
+        stacked *= -gamma  # [-γ P z zᵀ P; γ e (P z)ᵀ], the increments of Eqs. 30 and 29
+        stacked += now.stacked  # [P - γ P z zᵀ P (Eq. 30); Θᵀ + γ e (P z)ᵀ (Eq. 29, every i)]
+        trace_p = float(_sum(new.diagonal))  # trace(P - γ P z zᵀ P)
+        scale = 1.0 / rho if self._exponential else 1.0  # the 1/ρ of Eq. 30 corrected
         clipped = False
         trace_max = self._config.trace_max
         if trace_max is not None and trace_p * scale > trace_max:
-            scale = trace_max / trace_p
+            scale = trace_max / trace_p  # wind-up guard: trace(P(k+1)) = trace_max
             clipped = True
         if scale != 1.0:
-            new.P *= scale
+            new.P *= scale  # P(k+1): forgetting and the guard as one scaling
             trace_p *= scale  # trace(s P) = s trace(P), to rounding
         # One reduction: a non-finite entry anywhere makes the sum non-finite.
         if not (math.isfinite(float(_sum(stacked, None))) and _min(new.diagonal) > 0.0):
@@ -509,6 +515,52 @@ class Rls:
         out[2 * n : 3 * n] = du_a
         out[3 * n] = 1.0
         return out
+
+
+def rls_update_reference(
+    theta: np.ndarray, P: np.ndarray, z: np.ndarray, dx_next: np.ndarray, config: RlsConfig
+) -> tuple[np.ndarray, np.ndarray, RlsStep]:
+    """One update of Eqs. 26, 29-31 written as the paper writes it: the readable reference
+    that :meth:`Rls.update` is tested against.
+
+    Column by column (Eq. 29 for each ``θᵢ``), fresh arrays, no checks and no buffers. The
+    same wind-up guard as :class:`Rls` (see the module docstring).
+
+    Parameters
+    ----------
+    theta : numpy.ndarray, shape (3n+1, 2n)
+        Θ(k) = [θ₁ … θ_p] (Eq. 22).
+    P : numpy.ndarray, shape (3n+1, 3n+1)
+        P(k), symmetric positive definite.
+    z : numpy.ndarray, shape (3n+1,)
+        z(k) (Eq. 23).
+    dx_next : numpy.ndarray, shape (2n,)
+        The measured δx(k+1).
+    config : RlsConfig
+
+    Returns
+    -------
+    theta_next : numpy.ndarray, shape (3n+1, 2n)
+        Θ(k+1).
+    P_next : numpy.ndarray, shape (3n+1, 3n+1)
+        P(k+1).
+    step : RlsStep
+        The a-priori residual, γ, trace(P(k+1)) and whether the guard acted.
+    """
+    gamma = 1.0 / (z @ P @ z + config.rho)  # γ(k) (Eq. 31)
+    residual = np.empty(theta.shape[1])
+    theta_next = np.empty_like(theta)
+    for i in range(theta.shape[1]):
+        theta_i = theta[:, i]  # θᵢ(k) (Eq. 21)
+        residual[i] = dx_next[i] - z @ theta_i  # eᵢ(k) = xᵢ(k+1) - zᵀ θᵢ (Eq. 26)
+        theta_next[:, i] = theta_i + gamma * (P @ z) * residual[i]  # θᵢ(k+1) (Eq. 29)
+    P_next = P - gamma * P @ np.outer(z, z) @ P  # Eq. 30 as printed
+    if config.forgetting == "exponential":
+        P_next = P_next / config.rho  # Eq. 30 corrected
+    clipped = config.trace_max is not None and np.trace(P_next) > config.trace_max
+    if clipped:
+        P_next = P_next * (config.trace_max / np.trace(P_next))  # wind-up guard
+    return theta_next, P_next, RlsStep(residual, gamma, float(np.trace(P_next)), clipped)
 
 
 # The ufunc reductions, without ndarray.sum's Python wrapper (a third of its cost here).
