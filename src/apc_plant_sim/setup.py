@@ -22,6 +22,7 @@ setup(
     entry_points={
         "console_scripts": [
             "plant_node = apc_plant_sim.node:main",
+            "robot_sim = apc_plant_sim.robot_sim:main",
             "arm = apc_plant_sim.arm:main",
             "experiment = apc_plant_sim.experiment:main",
             "analyze = apc_plant_sim.analyze:main",

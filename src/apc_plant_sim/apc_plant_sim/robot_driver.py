@@ -1,0 +1,280 @@
+"""The loop of a ros2_control robot, as a plain class told the time (no rclpy).
+
+A ros2_control robot runs ``read() -> update() -> write()`` at the controller manager's
+``update_rate``: ``joint_state_broadcaster`` publishes what ``read()`` measured, stamped with
+the robot's clock, and an effort ``forward_command_controller`` writes the newest
+``Float64MultiArray`` it holds (one value per joint, its ``joints`` order) to the hardware.
+:class:`RobotDriver` is that loop around a physics engine (:mod:`apc_plant_sim.engines`):
+
+- :meth:`RobotDriver.measure` is ``read()``: the state at ``now``, in the published joint order
+  (any order, with joints apc does not control), velocity and effort optional;
+- :meth:`RobotDriver.offer` is the command subscription: a command with the wrong length or a
+  non-finite value is rejected and counted, never applied; a good one replaces the one held;
+- :meth:`RobotDriver.advance` is ``write()`` plus the physics: the held command (or the safe
+  torque after ``command_timeout``), clipped to the effort limits, is applied over one driver
+  period ``1 / state_rate`` and the engine integrates it.
+
+Before the first command the arm stands still on its brakes, like an arm whose brakes release
+when its drives are enabled. After ``command_timeout`` seconds without a command the drive
+applies zero effort plus an optional viscous ``timeout_damping`` (the dynamic braking of a
+drive whose motor windings are shorted): what ros2_control hardware with a command timeout does
+(it zeroes the effort interface) and what a torque-controlled arm's drive does when its command
+stream stops. Zero effort is chosen over a gravity-compensating hold because a hold needs the
+arm's true dynamics, which no drive has; the arm then moves under gravity, as a real one would
+with its brakes released, so a controller that relies on the hardware timeout sees it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+class DriverError(ValueError):
+    """A bad driver configuration; the message starts with the parameter's name."""
+
+
+class Engine(Protocol):
+    """What the driver needs of a physics engine: the arm's state and one integration."""
+
+    joint_names: tuple[str, ...]
+    effort_limit: np.ndarray
+
+    @property
+    def q(self) -> np.ndarray: ...
+
+    @property
+    def qd(self) -> np.ndarray: ...
+
+    def advance(self, tau: np.ndarray, duration: float) -> None:
+        """Hold ``tau`` (N m, URDF joint order) for ``duration`` seconds and integrate."""
+
+    def hold(self) -> None:
+        """Brakes on: zero the velocity, keep the position."""
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """Timing, command handling and the published message of a simulated robot.
+
+    Attributes
+    ----------
+    state_rate : float
+        The driver's cycle rate (Hz): one joint state per cycle, one physics period
+        ``1 / state_rate`` per cycle (the controller manager's ``update_rate``).
+    command_timeout : float
+        Seconds (driver clock) after the newest command before the safe torque applies.
+    timeout_damping : float
+        Viscous torque ``-timeout_damping * q'`` (N m s/rad) added to the zero effort after a
+        command timeout; 0 = zero effort alone.
+    command_joints : tuple of str
+        Joint order of the command's ``data`` (empty = the engine's joint order).
+    state_joints : tuple of str
+        Joint order of the published state (empty = the engine's order). Must name every joint
+        of the engine once; other names are joints apc does not control (a gripper finger),
+        published at a constant ``extra_position`` with zero velocity and effort.
+    extra_position : float
+        Position of the extra joints (rad or m).
+    publish_velocity, publish_effort : bool
+        Fill ``velocity`` / ``effort`` (the torque applied over the period that ended at the
+        stamp), or leave them empty, as a robot without those state interfaces does.
+    effort_limit : tuple of float
+        |tau| bound per joint (N m); empty = the engine's (the URDF's). Every command is
+        clipped to it and each clipped joint counted.
+    """
+
+    state_rate: float = 500.0
+    command_timeout: float = 0.1
+    timeout_damping: float = 0.0
+    command_joints: tuple[str, ...] = ()
+    state_joints: tuple[str, ...] = ()
+    extra_position: float = 0.0
+    publish_velocity: bool = True
+    publish_effort: bool = True
+    effort_limit: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("state_rate", "command_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise DriverError(f"{name}: must be > 0, got {value}")
+        if not (math.isfinite(self.timeout_damping) and self.timeout_damping >= 0.0):
+            raise DriverError(f"timeout_damping: must be >= 0, got {self.timeout_damping}")
+        if not math.isfinite(self.extra_position):
+            raise DriverError(f"extra_position: must be finite, got {self.extra_position}")
+        if not all(math.isfinite(v) and v > 0.0 for v in self.effort_limit):
+            raise DriverError(f"effort_limit: every value must be > 0, got {self.effort_limit}")
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.state_rate
+
+
+@dataclass(frozen=True, eq=False)
+class Reading:
+    """One joint state as ``joint_state_broadcaster`` publishes it (published order)."""
+
+    stamp: float
+    names: tuple[str, ...]
+    position: np.ndarray
+    velocity: np.ndarray | None
+    effort: np.ndarray | None
+
+
+@dataclass
+class DriverCounts:
+    """What ``/diagnostics`` reports (only goes up)."""
+
+    commands: int = 0
+    rejected: int = 0
+    timeouts: int = 0
+    timeout_cycles: int = 0
+    clipped: int = 0
+    clipped_per_joint: dict[str, int] = field(default_factory=dict)
+    cycles: int = 0
+
+
+def _order(names: Sequence[str], engine_names: Sequence[str], param: str) -> np.ndarray:
+    """Index into the engine's joint order for each name of ``names`` (a permutation)."""
+    if sorted(names) != sorted(engine_names):
+        raise DriverError(
+            f"{param}: must name each joint {list(engine_names)} once, got {list(names)}"
+        )
+    return np.array([list(engine_names).index(name) for name in names], dtype=int)
+
+
+class RobotDriver:
+    """A simulated ros2_control robot around ``engine`` (see module docstring)."""
+
+    def __init__(self, engine: Engine, config: DriverConfig) -> None:
+        self.engine = engine
+        self.config = config
+        names = tuple(engine.joint_names)
+        self.joint_names = names
+        n = len(names)
+        self.command_joints = config.command_joints or names
+        # command data[i] is the torque of engine joint _command_index[i].
+        self._command_index = _order(self.command_joints, names, "command_joints")
+        state_joints = config.state_joints or names
+        if len(set(state_joints)) != len(state_joints):
+            raise DriverError(f"state_joints: names repeat: {list(state_joints)}")
+        missing = [name for name in names if name not in state_joints]
+        if missing:
+            raise DriverError(f"state_joints: must name every joint, missing {missing}")
+        self.state_joints = tuple(state_joints)
+        # Published entry j is engine joint _state_index[j], or an extra joint (-1).
+        self._state_index = np.array(
+            [names.index(name) if name in names else -1 for name in state_joints], dtype=int
+        )
+        self._extra = self._state_index < 0
+        if config.effort_limit:
+            if len(config.effort_limit) != n:
+                raise DriverError(
+                    f"effort_limit: needs {n} values (one per joint) or none, "
+                    f"got {len(config.effort_limit)}"
+                )
+            self.effort_limit = np.array(config.effort_limit, dtype=float)
+        else:
+            self.effort_limit = np.asarray(engine.effort_limit, dtype=float).copy()
+        self.counts = DriverCounts()
+        self._command: np.ndarray | None = None  # engine order
+        self._command_time = -math.inf
+        self._timed_out = False
+        self._applied = np.zeros(n)  # torque over the period that ended at the last advance
+        self.braked = True
+
+    # -- command subscription -------------------------------------------------------------------
+    def offer(self, data: Sequence[float], now: float) -> str | None:
+        """Take a command received at ``now``; return why it was rejected, or None.
+
+        A rejected command is counted and never applied; the command held before stays.
+        """
+        values = np.asarray(data, dtype=float).reshape(-1)
+        n = len(self.joint_names)
+        if values.shape != (n,):
+            reason = (
+                f"data: {values.size} values, expected {n} (one per joint of "
+                f"{list(self.command_joints)})"
+            )
+        elif not np.isfinite(values).all():
+            bad = [self.command_joints[i] for i in np.flatnonzero(~np.isfinite(values))]
+            reason = f"data: non-finite value for {bad}"
+        else:
+            command = np.empty(n)
+            command[self._command_index] = values
+            self._command = command
+            self._command_time = now
+            self.counts.commands += 1
+            return None
+        self.counts.rejected += 1
+        return reason
+
+    @property
+    def has_command(self) -> bool:
+        return self._command is not None
+
+    @property
+    def command_time(self) -> float:
+        """Driver time the held command arrived (``-inf`` before the first)."""
+        return self._command_time
+
+    @property
+    def timed_out(self) -> bool:
+        return self._timed_out
+
+    # -- read -----------------------------------------------------------------------------------
+    def measure(self, now: float) -> Reading:
+        """The joint state at ``now`` as the robot publishes it."""
+        return self._reading(now, self.engine.q, self.engine.qd)
+
+    def _reading(self, now: float, q: np.ndarray, qd: np.ndarray) -> Reading:
+        index = np.where(self._extra, 0, self._state_index)
+        position = np.where(self._extra, self.config.extra_position, q[index])
+        velocity = np.where(self._extra, 0.0, qd[index]) if self.config.publish_velocity else None
+        effort = (
+            np.where(self._extra, 0.0, self._applied[index]) if self.config.publish_effort else None
+        )
+        return Reading(now, self.state_joints, position, velocity, effort)
+
+    # -- write + physics ------------------------------------------------------------------------
+    def torque(self, now: float) -> tuple[np.ndarray, bool]:
+        """The torque the drive applies from ``now``: (torque, timed_out), before clipping."""
+        assert self._command is not None
+        if now - self._command_time > self.config.command_timeout:
+            return -self.config.timeout_damping * self.engine.qd, True
+        return self._command, False
+
+    def advance(self, now: float) -> np.ndarray:
+        """Apply the drive's torque from ``now`` for one period and integrate; return it.
+
+        Before the first command the brakes hold the arm (nothing is integrated).
+        """
+        self.counts.cycles += 1
+        if self._command is None:
+            self.engine.hold()
+            self._applied = np.zeros(len(self.joint_names))
+            return self._applied
+        self.braked = False
+        tau, timed_out = self.torque(now)
+        if timed_out:
+            self.counts.timeout_cycles += 1
+            if not self._timed_out:
+                self.counts.timeouts += 1
+        self._timed_out = timed_out
+        clipped = np.abs(tau) > self.effort_limit
+        if clipped.any():
+            self.counts.clipped += 1
+            for i in np.flatnonzero(clipped):
+                name = self.joint_names[i]
+                self.counts.clipped_per_joint[name] = self.counts.clipped_per_joint.get(name, 0) + 1
+            tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.engine.advance(tau, self.config.period)
+        self._applied = np.array(tau, dtype=float)
+        return self._applied
+
+
+__all__ = ["DriverConfig", "DriverCounts", "DriverError", "Engine", "Reading", "RobotDriver"]

@@ -1,0 +1,329 @@
+"""``robot_sim``: a simulated arm that behaves like a ros2_control robot, not like apc's plant.
+
+It publishes ``/joint_states`` the way ``joint_state_broadcaster`` does (absolute topic,
+``SystemDefaultsQoS``, its own rate ``state_rate``, stamped with its own clock, joints in
+``state_joints`` order with optional extra joints, velocity and effort optional) and takes
+efforts the way an effort ``forward_command_controller`` does (``std_msgs/Float64MultiArray``
+on ``command_topic``, ``SystemDefaultsQoS``, one value per joint in ``command_joints`` order,
+the newest one held). The loop, the command checks, the effort limits and the command timeout
+are :class:`apc_plant_sim.robot_driver.RobotDriver`; the physics is ``engine``
+(:mod:`apc_plant_sim.engines`).
+
+Time
+----
+``sim_time: false`` (default): a wall timer runs the loop at ``state_rate``; stamps are the
+node's clock (system time). ``sim_time: true``: the node owns time, publishes ``/clock`` and
+steps as fast as the controllers answer, the way Gazebo or MuJoCo are run with
+``use_sim_time``: after publishing the state at ``t`` it waits for a command received after
+that state (or ``sim_wait_s`` of wall time) before it integrates to ``t + 1/state_rate``.
+Controllers slower than the driver (``state_rate`` = 500 Hz, T = 10 ms) answer every
+``sim_cycles_per_command`` cycles; the cycles in between step without waiting. Before the first
+command it re-sends the state every :data:`SIM_RESEND_S` (or ``sim_wait_s`` if shorter)
+without advancing, for controllers that start later.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import qos_profile_system_default
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from apc_core import wire
+from apc_core.nodeutil import (
+    ROBOT_PARAMS,
+    Diagnostics,
+    DiagnosticsPublisher,
+    guarded,
+    robot_from_params,
+    run_node,
+)
+from apc_core.params import ConfigError, Param, declare
+from apc_plant_sim import node as plant_node
+from apc_plant_sim.engines import ENGINES, PinocchioEngine, payload_from_values
+from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
+
+#: Where ros2_control's ``joint_state_broadcaster`` publishes (``use_local_topics: false``).
+JOINT_STATES_TOPIC = "/joint_states"
+#: ``~/commands`` of an effort ``forward_command_controller`` named ``effort_controller``.
+DEFAULT_COMMAND_TOPIC = "/effort_controller/commands"
+
+#: sim_time: wall seconds between re-sends of the first state until a command arrives.
+SIM_RESEND_S = 0.1
+
+_DEFAULTS = DriverConfig()
+#: The arm's start and payload, declared as ``plant_node`` declares them (``payload.at_s`` is
+#: driver time since the first cycle here).
+PLANT_ARM_PARAMS = tuple(
+    p for p in plant_node.PARAMS if p.name == "q_initial_deg" or p.name.startswith("payload.")
+)
+
+PARAMS: tuple[Param, ...] = (
+    *(p for p in ROBOT_PARAMS if p.name != "period"),
+    Param("engine", "pinocchio", f"physics engine: {' or '.join(ENGINES)}"),
+    Param(
+        "state_rate",
+        _DEFAULTS.state_rate,
+        "driver cycle rate (Hz): one joint state and one physics period per cycle",
+        1.0,
+        10000.0,
+    ),
+    Param("command_topic", DEFAULT_COMMAND_TOPIC, "effort command topic (Float64MultiArray)"),
+    Param(
+        "command_joints",
+        [],
+        "joint order of the command's data; empty = the URDF's moving joints in order",
+        array_of=str,
+    ),
+    Param(
+        "command_timeout",
+        _DEFAULTS.command_timeout,
+        "seconds (driver clock) without a command before the drive applies zero effort",
+        1e-4,
+        3600.0,
+    ),
+    Param(
+        "timeout_damping",
+        _DEFAULTS.timeout_damping,
+        "viscous braking after a command timeout (N m s/rad); 0 = zero effort alone",
+        0.0,
+        1e6,
+    ),
+    Param(
+        "state_joints",
+        [],
+        "joint order of the published state; names not in the URDF are extra joints at "
+        "extra_position (e.g. a gripper finger); empty = the URDF's order",
+        array_of=str,
+    ),
+    Param("extra_position", _DEFAULTS.extra_position, "position of the extra joints", -1e3, 1e3),
+    Param("publish_velocity", _DEFAULTS.publish_velocity, "fill JointState.velocity"),
+    Param("publish_effort", _DEFAULTS.publish_effort, "fill JointState.effort (applied torque)"),
+    Param(
+        "effort_limit",
+        [],
+        "|torque| limit per joint (N m), commands clipped to it; empty = the URDF's limits",
+    ),
+    *PLANT_ARM_PARAMS,
+    Param(
+        "physics_step",
+        0.001,
+        "pinocchio engine: longest RK4 step (s); each period is split into equal steps",
+        1e-6,
+        1.0,
+    ),
+    Param("sim_time", False, "own the clock: publish /clock and step as the controllers answer"),
+    Param(
+        "sim_wait_s",
+        0.5,
+        "sim_time: wall seconds to wait for a command before stepping without one",
+        1e-3,
+        60.0,
+    ),
+    Param(
+        "sim_cycles_per_command",
+        1,
+        "sim_time: driver cycles per controller command (state_rate x the controllers' "
+        "period); the driver waits for a command every this many cycles",
+        1,
+        100000,
+    ),
+)
+
+
+def _driver_config(values: dict[str, Any]) -> DriverConfig:
+    try:
+        return DriverConfig(
+            state_rate=values["state_rate"],
+            command_timeout=values["command_timeout"],
+            timeout_damping=values["timeout_damping"],
+            command_joints=tuple(values["command_joints"]),
+            state_joints=tuple(values["state_joints"]),
+            extra_position=values["extra_position"],
+            publish_velocity=values["publish_velocity"],
+            publish_effort=values["publish_effort"],
+            effort_limit=tuple(values["effort_limit"]),
+        )
+    except DriverError as exc:
+        raise ConfigError(f"parameter '{str(exc).split(':')[0]}': {exc}") from None
+
+
+class RobotSimNode(Node):
+    """The simulated ros2_control robot (see module docstring)."""
+
+    def __init__(self, node_name: str = "robot_sim", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        values = declare(self, PARAMS)
+        robot = robot_from_params(values)
+        n = robot.n_joints
+        config = _driver_config(values)
+        q0 = values["q_initial_deg"] or [0.0] * n
+        if len(q0) != n:
+            raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
+        payload = payload_from_values(robot, values)
+        at_s = values["payload.at_s"] if payload.mass_kg > 0.0 else 0.0
+        engine_name = values["engine"]
+        if engine_name == "pinocchio":
+            self.engine = PinocchioEngine(
+                robot,
+                payload,
+                period=config.period,
+                max_step=values["physics_step"],
+                q0=np.deg2rad(q0),
+                loaded=at_s == 0.0,
+            )
+        else:
+            raise ConfigError(
+                f"parameter 'engine': must be one of {', '.join(ENGINES)}, got {engine_name!r}"
+            )
+        try:
+            self.driver = RobotDriver(self.engine, config)
+        except DriverError as exc:
+            raise ConfigError(f"parameter '{str(exc).split(':')[0]}': {exc}") from None
+        self._pickup_s = at_s
+        self.sim_time = bool(values["sim_time"])
+        self._sim_wait_s = float(values["sim_wait_s"])
+        self.command_topic = values["command_topic"]
+        self.diagnostics = Diagnostics(self.get_fully_qualified_name(), hardware_id="robot_sim")
+        self.diagnostics.set("engine", engine_name)
+        self.diagnostics.set("state_rate_hz", config.state_rate)
+        self._msg = JointState()
+        self._clock_msg = ClockMsg()
+        # joint_state_broadcaster and forward_command_controller both use SystemDefaultsQoS.
+        self.state_pub = self.create_publisher(
+            JointState, JOINT_STATES_TOPIC, qos_profile_system_default
+        )
+        self.clock_pub = (
+            self.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS) if self.sim_time else None
+        )
+        self.command_sub = self.create_subscription(
+            Float64MultiArray,
+            self.command_topic,
+            guarded(self, self.diagnostics, "command", self._on_command),
+            qos_profile_system_default,
+        )
+        self._diagnostics_pub = DiagnosticsPublisher(self, self.diagnostics)
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
+        # Driver time: sim time from 0, or the node's clock (system time) at the first cycle.
+        self._start: float | None = 0.0 if self.sim_time else None
+        self._period_ns = round(wire.NS_PER_S / config.state_rate)
+        self._k = 0  # sim time of the state last published: k periods
+        self._t = 0.0
+        self._cycles_per_command = int(values["sim_cycles_per_command"])
+        self._published_wall = 0.0
+        if self.sim_time:
+            self._publish(self.driver.measure(0.0))
+            tick = guarded(self, self.diagnostics, "sim_wait", self._sim_watch)
+            self._timer = self.create_timer(min(self._sim_wait_s, 0.01), tick, clock=self._wall)
+        else:
+            tick = guarded(self, self.diagnostics, "cycle", self._wall_cycle)
+            self._timer = self.create_timer(config.period, tick, clock=self._wall)
+
+    # -- wire -----------------------------------------------------------------------------------
+    def _now(self) -> float:
+        if self.sim_time:
+            return self._t
+        return self.get_clock().now().nanoseconds / wire.NS_PER_S
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        reason = self.driver.offer(msg.data, self._now())
+        if reason is not None:
+            self.get_logger().warn(
+                f"rejected command on '{self.command_topic}' ({self.driver.counts.rejected} so "
+                f"far): {reason}",
+                throttle_duration_sec=1.0,
+            )
+            self._sync_diagnostics()
+            return
+        if self.sim_time:
+            self._sim_step()
+
+    def _publish(self, reading: Reading) -> None:
+        stamp_ns = round(reading.stamp * wire.NS_PER_S)
+        if self.clock_pub is not None:
+            self._clock_msg.clock = wire.ns_to_stamp(stamp_ns, self._clock_msg.clock)
+            self.clock_pub.publish(self._clock_msg)
+        msg = wire.arrays_to_joint_state(
+            stamp_ns,
+            reading.names,
+            position=reading.position,
+            velocity=reading.velocity,
+            effort=reading.effort,
+            msg=self._msg,
+        )
+        self.state_pub.publish(msg)
+        self._published_wall = time.monotonic()
+
+    def _sync_diagnostics(self) -> None:
+        counts = self.driver.counts
+        counters = self.diagnostics.counters
+        for key in ("commands", "rejected", "timeouts", "timeout_cycles", "clipped", "cycles"):
+            counters[key] = getattr(counts, key)
+        for name, value in counts.clipped_per_joint.items():
+            counters[f"clipped.{name}"] = value
+        if self.driver.timed_out:
+            self.diagnostics.level = 1  # WARN
+            self.diagnostics.message = "command timeout: zero effort"
+        elif self.driver.braked:
+            self.diagnostics.message = "brakes on: waiting for the first command"
+        else:
+            self.diagnostics.level = 0
+            self.diagnostics.message = "ok"
+
+    def _cycle(self, now: float) -> None:
+        """Apply the drive's torque from ``now`` for one period (``write()`` + physics)."""
+        assert self._start is not None
+        if self._pickup_s and now - self._start >= self._pickup_s:
+            self.engine.load_payload()
+            self._pickup_s = 0.0
+            self.get_logger().info(f"t = {now - self._start:.3f} s: payload picked up")
+        was_timed_out = self.driver.timed_out
+        self.driver.advance(now)
+        if self.driver.timed_out and not was_timed_out:
+            self.get_logger().warn(
+                f"no command for {self.driver.config.command_timeout} s: applying zero effort"
+            )
+        self._sync_diagnostics()
+
+    # -- wall time ------------------------------------------------------------------------------
+    def _wall_cycle(self) -> None:
+        now = self._now()
+        if self._start is None:
+            self._start = now
+        self._publish(self.driver.measure(now))  # read() -> joint_state_broadcaster
+        self._cycle(now)
+
+    # -- sim time -------------------------------------------------------------------------------
+    def _sim_step(self) -> None:
+        """Integrate one period, then on to the next cycle that waits for a command."""
+        while True:
+            self._cycle(self._t)
+            self._k += 1
+            self._t = self._k * self._period_ns / wire.NS_PER_S
+            self._publish(self.driver.measure(self._t))
+            if self._k % self._cycles_per_command == 0:
+                return
+
+    def _sim_watch(self) -> None:
+        waited = time.monotonic() - self._published_wall
+        if not self.driver.has_command:
+            if waited >= min(SIM_RESEND_S, self._sim_wait_s):
+                self._publish(self.driver.measure(self._t))
+        elif waited >= self._sim_wait_s:
+            self.diagnostics.count("unanswered_cycles")
+            self._sim_step()
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(RobotSimNode, prog="robot_sim", summary=__doc__ or "", params=PARAMS, args=args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""The simulated ros2_control robot's loop (:class:`RobotDriver`), told the time (no ROS graph)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from apc_core.nodeutil import resolve_config_path
+from apc_core.robot import Payload, load_robot, with_payload
+from apc_plant_sim.engines import PinocchioEngine
+from apc_plant_sim.plant import Plant, PlantConfig
+from apc_plant_sim.robot_driver import DriverConfig, DriverError, RobotDriver
+
+NAMES = ("joint_1", "joint_2", "joint_3")
+
+
+class RecordingEngine:
+    """Integrates nothing; records what the driver applies (q' is settable)."""
+
+    def __init__(self) -> None:
+        self.joint_names = NAMES
+        self.effort_limit = np.array([97.6, 186.4, 89.4])
+        self.q = np.array([0.1, 0.2, 0.3])
+        self.qd = np.array([1.0, -2.0, 0.5])
+        self.applied: list[tuple[np.ndarray, float]] = []
+        self.holds = 0
+
+    def advance(self, tau: np.ndarray, duration: float) -> None:
+        self.applied.append((np.array(tau), duration))
+
+    def hold(self) -> None:
+        self.holds += 1
+
+
+def _driver(**overrides) -> tuple[RobotDriver, RecordingEngine]:
+    engine = RecordingEngine()
+    return RobotDriver(engine, DriverConfig(**overrides)), engine
+
+
+def test_brakes_hold_until_the_first_command_then_it_is_applied_for_one_period():
+    driver, engine = _driver(state_rate=250.0)
+    driver.advance(0.0)
+    assert engine.holds == 1 and not engine.applied and driver.braked
+    assert driver.offer([1.0, 2.0, 3.0], 0.001) is None
+    driver.advance(0.004)
+    tau, duration = engine.applied[-1]
+    np.testing.assert_array_equal(tau, [1.0, 2.0, 3.0])
+    assert duration == pytest.approx(0.004)
+    assert not driver.braked and driver.counts.commands == 1
+
+
+def test_command_joints_order_maps_data_to_the_urdf_joints():
+    driver, engine = _driver(command_joints=("joint_3", "joint_1", "joint_2"))
+    driver.offer([3.0, 1.0, 2.0], 0.0)
+    driver.advance(0.0)
+    np.testing.assert_array_equal(engine.applied[-1][0], [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize(
+    ("data", "reason"),
+    [
+        ([1.0, 2.0], "2 values, expected 3"),
+        ([1.0, 2.0, 3.0, 4.0], "4 values, expected 3"),
+        ([], "0 values"),
+        ([1.0, float("nan"), 3.0], "non-finite value for ['joint_2']"),
+        ([1.0, 2.0, float("inf")], "non-finite value for ['joint_3']"),
+    ],
+)
+def test_bad_commands_are_rejected_counted_and_never_applied(data, reason):
+    driver, engine = _driver()
+    driver.offer([1.0, 2.0, 3.0], 0.0)
+    got = driver.offer(data, 0.001)
+    assert got is not None and reason in got
+    assert driver.counts.rejected == 1 and driver.counts.commands == 1
+    driver.advance(0.002)
+    np.testing.assert_array_equal(engine.applied[-1][0], [1.0, 2.0, 3.0])
+    # The held command keeps its own time: a rejected one does not refresh the timeout.
+    assert driver.command_time == 0.0
+
+
+def test_commands_beyond_the_effort_limits_are_clipped_and_counted_per_joint():
+    driver, engine = _driver()
+    driver.offer([500.0, -10.0, -100.0], 0.0)
+    driver.advance(0.0)
+    np.testing.assert_array_equal(engine.applied[-1][0], [97.6, -10.0, -89.4])
+    assert driver.counts.clipped == 1
+    assert driver.counts.clipped_per_joint == {"joint_1": 1, "joint_3": 1}
+
+
+def test_effort_limit_parameter_overrides_the_urdf():
+    driver, engine = _driver(effort_limit=(5.0, 5.0, 5.0))
+    driver.offer([6.0, -6.0, 1.0], 0.0)
+    driver.advance(0.0)
+    np.testing.assert_array_equal(engine.applied[-1][0], [5.0, -5.0, 1.0])
+
+
+def test_after_command_timeout_the_drive_applies_zero_effort_plus_damping():
+    driver, engine = _driver(state_rate=100.0, command_timeout=0.055, timeout_damping=2.0)
+    driver.offer([1.0, 2.0, 3.0], 1.0)
+    for k in range(10):  # 1.00 ... 1.09 s
+        driver.advance(1.0 + 0.01 * k)
+    applied = [tau for tau, _ in engine.applied]
+    for tau in applied[:6]:  # age 0 ... 0.05 s: still the command (timeout 0.055 s)
+        np.testing.assert_array_equal(tau, [1.0, 2.0, 3.0])
+    for tau in applied[6:]:
+        np.testing.assert_allclose(tau, -2.0 * engine.qd)
+    assert driver.timed_out
+    assert driver.counts.timeouts == 1 and driver.counts.timeout_cycles == 4
+    driver.offer([4.0, 5.0, 6.0], 1.1)  # a fresh command ends the timeout
+    driver.advance(1.1)
+    np.testing.assert_array_equal(engine.applied[-1][0], [4.0, 5.0, 6.0])
+    assert not driver.timed_out and driver.counts.timeouts == 1
+
+
+def test_pure_zero_effort_by_default():
+    driver, engine = _driver(command_timeout=0.01)
+    driver.offer([1.0, 2.0, 3.0], 0.0)
+    driver.advance(0.02)
+    np.testing.assert_array_equal(engine.applied[-1][0], np.zeros(3))
+
+
+def test_measure_in_state_joints_order_with_an_extra_joint_and_optional_fields():
+    driver, _ = _driver(
+        state_joints=("joint_2", "finger", "joint_3", "joint_1"),
+        extra_position=0.04,
+        publish_velocity=False,
+    )
+    driver.offer([1.0, 2.0, 3.0], 0.0)
+    driver.advance(0.0)
+    reading = driver.measure(12.5)
+    assert reading.stamp == 12.5
+    assert reading.names == ("joint_2", "finger", "joint_3", "joint_1")
+    np.testing.assert_array_equal(reading.position, [0.2, 0.04, 0.3, 0.1])
+    assert reading.velocity is None
+    np.testing.assert_array_equal(reading.effort, [2.0, 0.0, 3.0, 1.0])
+    driver2, _ = _driver(publish_effort=False)
+    reading2 = driver2.measure(0.0)
+    assert reading2.effort is None
+    np.testing.assert_array_equal(reading2.velocity, [1.0, -2.0, 0.5])
+
+
+@pytest.mark.parametrize(
+    ("overrides", "param"),
+    [
+        ({"state_rate": 0.0}, "state_rate"),
+        ({"command_timeout": float("nan")}, "command_timeout"),
+        ({"timeout_damping": -1.0}, "timeout_damping"),
+        ({"effort_limit": (1.0, 0.0, 1.0)}, "effort_limit"),
+        ({"effort_limit": (1.0, 1.0)}, "effort_limit"),
+        ({"command_joints": ("joint_1", "joint_2")}, "command_joints"),
+        ({"command_joints": ("joint_1", "joint_1", "joint_2")}, "command_joints"),
+        ({"state_joints": ("joint_1", "joint_2")}, "state_joints"),
+        ({"state_joints": ("joint_1", "joint_2", "joint_3", "joint_1")}, "state_joints"),
+    ],
+)
+def test_bad_configuration_names_the_parameter(overrides, param):
+    with pytest.raises(DriverError, match=f"^{param}:"):
+        _driver(**overrides)
+
+
+def test_pinocchio_engine_is_apcs_plant_under_the_same_torques():
+    """The driver on the pinocchio engine integrates exactly what apc's plant integrates."""
+    robot = load_robot(resolve_config_path("puma560_3dof.urdf"))
+    payload = Payload(mass_kg=2.268)
+    q0 = np.deg2rad([0.0, -20.0, 30.0])
+    engine = PinocchioEngine(robot, payload, period=0.01, max_step=0.0025, q0=q0)
+    driver = RobotDriver(engine, DriverConfig(state_rate=100.0))
+    plant = Plant(with_payload(robot, payload), PlantConfig(period=0.01, step=0.0025), q0)
+    rng = np.random.default_rng(3)
+    for k in range(50):
+        tau = rng.uniform(-30.0, 30.0, 3)
+        driver.offer(tau, 0.01 * k)
+        driver.advance(0.01 * k)
+        plant.step(tau)
+    reading = driver.measure(0.5)
+    np.testing.assert_array_equal(reading.position, plant.q)
+    np.testing.assert_array_equal(reading.velocity, plant.qd)
+
+
+def test_pinocchio_engine_picks_the_payload_up():
+    robot = load_robot(resolve_config_path("puma560_3dof.urdf"))
+    payload = Payload(mass_kg=2.268)
+    q0 = np.deg2rad([0.0, -20.0, 30.0])
+    engine = PinocchioEngine(robot, payload, period=0.01, max_step=0.005, q0=q0, loaded=False)
+    bare = PinocchioEngine(robot, Payload(), period=0.01, max_step=0.005, q0=q0)
+    for e in (engine, bare):
+        e.advance(np.zeros(3), 0.01)
+    np.testing.assert_array_equal(engine.q, bare.q)
+    engine.load_payload()
+    for e in (engine, bare):
+        e.advance(np.zeros(3), 0.01)
+    assert not np.allclose(engine.q, bare.q)

@@ -1,0 +1,172 @@
+"""``robot_sim`` over DDS: the executable behaves like a ros2_control robot.
+
+One process per test (``python -m apc_plant_sim.robot_sim``), talked to from a test node in
+this process: ``/joint_states`` as ``joint_state_broadcaster`` publishes it and efforts as an
+effort ``forward_command_controller`` takes them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.qos import qos_profile_system_default
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from apc_core import wire
+
+STATE_JOINTS = ["joint_2", "finger_joint", "joint_3", "joint_1"]
+URDF_ORDER = ("joint_1", "joint_2", "joint_3")
+
+
+class Peer:
+    """A controller's side of the robot: reads /joint_states, publishes commands."""
+
+    def __init__(self, graph, topic: str = "/effort_controller/commands") -> None:
+        node = graph.add(Node("peer", context=graph.context))
+        self.states: list[tuple[float, JointState]] = []
+        self.clock: list[int] = []
+        node.create_subscription(
+            JointState,
+            "/joint_states",
+            lambda m: self.states.append((time.monotonic(), m)),
+            qos_profile_system_default,
+        )
+        node.create_subscription(
+            ClockMsg,
+            "/clock",
+            lambda m: self.clock.append(wire.stamp_to_ns(m.clock)),
+            wire.CLOCK_QOS,
+        )
+        self.pub = node.create_publisher(Float64MultiArray, topic, qos_profile_system_default)
+
+    def command(self, values) -> None:
+        self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
+
+    def by_name(self, msg: JointState, field: str) -> dict[str, float]:
+        return dict(zip(msg.name, getattr(msg, field), strict=True))
+
+
+@contextlib.contextmanager
+def robot_sim(tmp_path: Path, *params: str) -> Iterator[subprocess.Popen]:
+    args = [sys.executable, "-m", "apc_plant_sim.robot_sim", "--ros-args"]
+    for p in params:
+        args += ["-p", p]
+    err = open(tmp_path / "robot_sim.err", "wb")
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        err.close()
+
+
+def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
+    peer = Peer(graph)
+    with robot_sim(
+        tmp_path,
+        "state_rate:=200.0",
+        f"state_joints:={STATE_JOINTS}".replace("'", ""),
+        "publish_velocity:=false",
+        "command_timeout:=0.2",
+        "q_initial_deg:=[0.0, -30.0, 45.0]",
+    ) as proc:
+        graph.spin_until(lambda: len(peer.states) >= 20 or proc.poll() is not None, 30, "states")
+        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
+        _, first = peer.states[-1]
+        assert list(first.name) == STATE_JOINTS
+        assert len(first.velocity) == 0 and len(first.effort) == len(STATE_JOINTS)
+        position = peer.by_name(first, "position")
+        # Brakes on until the first command: the arm stands at q_initial_deg.
+        assert np.rad2deg(position["joint_2"]) == pytest.approx(-30.0)
+        assert position["finger_joint"] == 0.0
+        # Stamps: the node's clock (system time), spaced 1/state_rate.
+        stamps = np.array([wire.stamp_to_ns(m.header.stamp) for _, m in peer.states[-15:]])
+        assert abs(stamps[-1] / 1e9 - time.time()) < 2.0
+        assert np.median(np.diff(stamps)) == pytest.approx(5e6, rel=0.2)
+
+        # A command in command_joints order (URDF order) is applied: it comes back as effort.
+        command = [5.0, -40.0, 12.0]
+        n_before = len(peer.states)
+        t_cmd = time.monotonic()
+
+        def applied() -> bool:
+            if len(peer.states) <= n_before:
+                return False
+            effort = peer.by_name(peer.states[-1][1], "effort")
+            return [effort[j] for j in URDF_ORDER] == command
+
+        while not applied():
+            peer.command(command)
+            t_last = time.monotonic()
+            graph.spin_for(0.01)
+            assert time.monotonic() - t_cmd < 10.0, "command never applied"
+        # The arm moves once released.
+        graph.spin_for(0.1)
+        moved = peer.by_name(peer.states[-1][1], "position")
+        assert moved["joint_2"] != position["joint_2"]
+
+        # No command for command_timeout: zero effort (the hardware's safety timeout), not before.
+        graph.spin_until(
+            lambda: all(v == 0.0 for v in peer.states[-1][1].effort), 10, "zero effort"
+        )
+        assert time.monotonic() - t_last >= 0.2
+        # A bad command is rejected, never applied.
+        peer.command([1.0, 2.0])
+        peer.command([1.0, float("nan"), 3.0])
+        graph.spin_for(0.2)
+        assert all(v == 0.0 for v in peer.states[-1][1].effort)
+
+
+def test_sim_time_robot_steps_only_when_the_controller_answers(graph, tmp_path):
+    peer = Peer(graph, topic="/arm/commands")
+    with robot_sim(
+        tmp_path,
+        "sim_time:=true",
+        "state_rate:=100.0",
+        "command_topic:=/arm/commands",
+        "sim_wait_s:=30.0",
+    ) as proc:
+        graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
+        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
+        for _ in range(20):
+            n = len(peer.states)
+            peer.command([0.0, 10.0, 0.0])
+            graph.spin_until(lambda n=n: len(peer.states) > n, 10, "next state")
+        graph.spin_for(0.3)  # nothing answered: the robot waits (sim_wait_s is 30 s)
+        stamps = [wire.stamp_to_ns(m.header.stamp) for _, m in peer.states]
+        distinct = sorted(set(stamps))
+        assert distinct == [k * 10_000_000 for k in range(21)]
+        assert peer.clock and max(peer.clock) == distinct[-1]
+
+
+def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):
+    for param, name in (
+        ("engine:=bullet", "engine"),
+        ("command_joints:=[joint_1, joint_2]", "command_joints"),
+        ("q_initial_deg:=[1.0]", "q_initial_deg"),
+    ):
+        proc = subprocess.run(
+            [sys.executable, "-m", "apc_plant_sim.robot_sim", "--ros-args", "-p", param],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and f"parameter '{name}'" in lines[0], proc.stderr
