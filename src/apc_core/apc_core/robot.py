@@ -179,6 +179,17 @@ def _check_urdf_xml(text: str) -> None:
             _float_attr(limit, "effort", f"joint '{name}' <limit>")
 
 
+def read_urdf(urdf: str | Path) -> tuple[str, str]:
+    """The XML of a URDF given as a file path or as the XML itself (a leading ``<``), and its
+    source: the path, or ``"<string>"``."""
+    if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
+        path = Path(urdf)
+        if not path.is_file():
+            raise RobotModelError(f"URDF file not found: {path}")
+        return path.read_text(), str(path)
+    return str(urdf), "<string>"
+
+
 def load_robot(
     urdf: str | Path,
     *,
@@ -207,15 +218,7 @@ def load_robot(
         Missing file, malformed XML, unsupported joint type, non-numeric inertia, a branch in the
         kinematic tree after locking, or no moving joint.
     """
-    if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
-        path = Path(urdf)
-        if not path.is_file():
-            raise RobotModelError(f"URDF file not found: {path}")
-        text = path.read_text()
-        source = str(path)
-    else:
-        text = str(urdf)
-        source = "<string>"
+    text, source = read_urdf(urdf)
     _check_urdf_xml(text)
     if not (math.isfinite(gravity) and gravity >= 0.0):
         raise RobotModelError(f"gravity must be finite and >= 0, got {gravity}")
