@@ -11,7 +11,6 @@ import json
 import os
 import platform
 import random
-import re
 import shlex
 import subprocess
 import sys
@@ -325,10 +324,6 @@ def write_results(
 
     RESULTS_MD.write_text(markdown(data))
     return data
-
-
-def slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
 # ------------------------------------------------------------------------------------ profiles

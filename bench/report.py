@@ -36,7 +36,7 @@ def _verdict(ok: bool | None) -> str:
 
 
 def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
-    """(figure, measured, target, verdict) for every moonshot of the issue."""
+    """(figure, measured, target, verdict) for every performance target apc sets itself."""
     rows: list[tuple[str, str, str, str]] = []
 
     def us(key: str, n: str, limit: float, label: str) -> None:

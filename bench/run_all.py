@@ -10,7 +10,7 @@ Parts, in this order (each also runs alone and then merges its figures into resu
 
 Every DDS participant runs on a random ``ROS_DOMAIN_ID``, localhost only; every process
 started is stopped. About 5-6 minutes on 2 cores, under 10 (``--quick``: about 3-4). No
-figure is asserted: the Markdown table compares them with the issue's targets and the paper's
+figure is asserted: the Markdown table compares them with apc's targets and the paper's
 7.5 ms.
 
     make bench                                   # = .venv/bin/python bench/run_all.py

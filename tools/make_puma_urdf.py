@@ -1,8 +1,7 @@
 """Generate the PUMA 560 URDFs in ``config/`` from the standard-DH reference parameters.
 
-Source: ``config/reference/puma560.json`` (a copy of ``shared/reference/puma560.json``: Corke &
-Armstrong-Helouvry 1994, dynamics of Armstrong, Khatib & Burdick 1986, as in Corke's Robotics
-Toolbox ``Puma560``).
+Source: ``config/reference/puma560.json`` (Corke & Armstrong-Helouvry 1994, dynamics of
+Armstrong, Khatib & Burdick 1986, as in Corke's Robotics Toolbox ``Puma560``).
 
 How standard DH maps onto URDF
 ------------------------------
@@ -23,11 +22,11 @@ The three-joint arm lumps links 4-6 (0.82 + 0.34 + 0.09 = 1.25 kg) as a point ma
 centre, a fixed link ``wrist_center`` at (0, 0, d4) in DH frame 3. The six-joint arm has the full
 wrist; its ``wrist_center`` frame coincides with DH frames 4-6 (a4 = a5 = a6 = d5 = d6 = 0).
 
-Joint effort limits: the reference gives none. We use the values commonly quoted for the PUMA
-560 (97.6, 186.4, 89.4, 24.2, 20.1, 21.3 N m); we could not check their primary source here,
-and the paper's experiment stays well below them (README reports the measured peak ratio).
+Joint effort limits: the reference gives none. These are the values commonly quoted for the
+PUMA 560 (97.6, 186.4, 89.4, 24.2, 20.1, 21.3 N m), without a primary source to check them
+against; the paper's experiment stays well below them (README reports the measured peak ratio).
 Velocity limits likewise are not in the source; 4 rad/s (joints 1-3) and 8 rad/s (wrist) are
-placeholders above anything the experiments command.
+bounds above anything the experiments command, not properties of the arm.
 
 Run: ``.venv/bin/python tools/make_puma_urdf.py`` (rewrites ``config/puma560*.urdf``).
 """

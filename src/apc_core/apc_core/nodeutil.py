@@ -27,7 +27,6 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
@@ -241,8 +240,7 @@ def destroy_nodes(
 
     The executor lets go of the nodes first: the events executor keeps using a node's handle
     (and serves timers from a thread of its own) while the node is added to it, and
-    ``destroy_node`` then waits for ever in ``destroy_when_not_in_use`` (caught in CI by the
-    teardown limit below: a feedforward_node stuck there after SIGTERM).
+    ``destroy_node`` would then wait for ever in ``destroy_when_not_in_use``.
     """
     nodes = list(nodes)
     if executor is not None:
@@ -288,7 +286,8 @@ def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
     The events executor takes a message to its callback in ~22 us against ~120 us
     (``bench/ros_loop.py``; two nodes ping-ponging a JointState, one process) and doubles the
     lockstep samples per second; results are the same bit for bit. Only its ``spin_once`` is
-    used: its ``spin`` is broken in this build (``ROS_WHEELS.md``).
+    used: in the Jazzy wheels apc runs on, ``EventsExecutor.spin()`` runs no callbacks and
+    ignores shutdown.
     """
     if kind == "events":
         from rclpy.experimental import EventsExecutor
@@ -302,9 +301,9 @@ def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
 def spin_once_or_stop(executor: Any, context: rclpy.Context | None = None) -> bool:
     """One ``spin_once`` (0.1 s at most); False once the context is shut down (a signal).
 
-    One event per call: the events executor's ``spin()`` is broken in this build and loops on
-    its ``spin_until_future_complete`` (fewer Python steps between events, a few per cent)
-    made the real-time fault tests fail now and then, so they were withdrawn.
+    One event per call, because the events executor's ``spin()`` runs no callbacks in these
+    wheels. Its ``spin_until_future_complete`` would save a few per cent of Python per event
+    but makes the real-time fault tests miss samples now and then under load.
     """
     if not rclpy.ok(context=context):
         return False
@@ -333,11 +332,10 @@ def run_node(
     ``--help`` prints the parameters. A :class:`ConfigError` (or a model/wire error) while the
     node is built prints one line naming the parameter and returns 2. The node spins on
     :func:`make_executor` of ``$APC_EXECUTOR``, ``events`` (rclpy's ``EventsExecutor``, ~2x
-    the single-threaded executor's messages per second) unless set to ``single``. With the
-    events executor a node process once hung in ``destroy_node`` after a signal in ~1 of 10
-    signal-test runs; since :func:`destroy_nodes` takes the nodes off the executor first, 37
-    runs of the signal tests (~550 processes stopped by SIGINT/SIGTERM) all ended cleanly.
-    SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down.
+    the single-threaded executor's messages per second) unless set to ``single``.
+    SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down; it
+    leaves the executor first (:func:`destroy_nodes`), since with the events executor
+    ``destroy_node`` on a node still added to it can hang after a signal.
     ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``)
     with the node's ``exit_code``.
     """
@@ -374,8 +372,8 @@ def run_nodes(
     # rclpy's SIGINT handler shuts the context down and then calls the handler it replaced. If
     # that is Python's default, a KeyboardInterrupt is also raised wherever Python happens to be,
     # e.g. inside rclpy's message conversion in take_message, which turns it into "RuntimeError:
-    # Unable to convert call argument" and a traceback with exit code 1 (seen when the runner
-    # stopped its children). With a no-op Python handler the shutdown is rclpy's alone: the
+    # Unable to convert call argument" and a traceback with exit code 1 (e.g. when the runner
+    # stops its children). With a no-op Python handler the shutdown is rclpy's alone: the
     # spin loop below ends cleanly. Restored on the way out.
     previous_sigint = None
     if (
@@ -433,10 +431,6 @@ def _arm_teardown_limit() -> bool:
 
 def _leave_to_rclpy(signum: int, frame: Any) -> None:
     """SIGINT handler under rclpy's: do nothing (rclpy has already shut the context down)."""
-
-
-def finite(values: np.ndarray) -> bool:
-    return bool(np.all(np.isfinite(values)))
 
 
 class StopSignals:

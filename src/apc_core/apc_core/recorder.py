@@ -1,10 +1,12 @@
 """``recorder``: record apc's topics to a rosbag2-compatible MCAP file, the way rosbag2 does.
 
 Subscriptions are created with ``raw=True``, so the exact CDR bytes that crossed the wire are
-written (``rclpy.serialization.serialize_message`` may pad; see ROS_WHEELS.md). Each message's
-log time is the recorder's clock at reception (sim time when ``use_sim_time`` is set, as in
-``experiment``), like ``ros2 bag record``. Chunks are flushed to the OS as they close, so a
-killed recorder loses at most the chunk it was filling; SIGINT/SIGTERM close a complete file.
+written: ``rclpy.serialization.serialize_message`` sizes its buffer by an estimate and can
+append uninitialised padding (a 2-joint JointState: 100 bytes for 96 of CDR), which strict
+readers such as rosbags reject. Each message's log time is the recorder's clock at reception
+(sim time when ``use_sim_time`` is set, as in ``experiment``), like ``ros2 bag record``.
+Chunks are flushed to the OS as they close, so a killed recorder loses at most the chunk it was
+filling; SIGINT/SIGTERM close a complete file.
 
     recorder --ros-args -p output:=run.mcap [-p topics:="[joint_states, feedback/torque]"]
 """

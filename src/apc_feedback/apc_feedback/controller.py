@@ -357,11 +357,11 @@ class AdaptiveFeedback(FeedbackLaw):
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
 
-        ``(D⁻¹)_ii > 0`` for any arm. Measured alternatives were worse (``bench/preset_sweep.py``
-        and an hour-long run): positive definiteness of the whole block fails from the start on
+        ``(D⁻¹)_ii > 0`` for any arm. Stricter tests do worse (``bench/preset_sweep.py``,
+        ``bench/long_run.py``): positive definiteness of the whole block fails from the start on
         the six-joint PUMA (Eq. 33's ``A B T²/2`` makes ``Ĝ(0)`` non-symmetric, wrist inertias
         are ~1e-4 of the arm's); bounds relative to ``Ĝ(0)`` destabilise the Panda; and
-        explaining a refused step's residual as a jump of ``ŵ`` destabilised an hour-long run.
+        explaining a refused step's residual as a jump of ``ŵ`` destabilises an hour-long run.
         """
         n = self.n_joints
         # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.

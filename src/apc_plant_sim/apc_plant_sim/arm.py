@@ -5,8 +5,9 @@
 
 The same ``plant_node``, ``feedforward_node`` and ``feedback_node`` as the three executables,
 built in one process: each reads its own section of the parameters file, a namespace remap
-applies to all, topics, QoS and ``ros2 param`` work as before. ``--controllers`` leaves the
-plant out, for a real arm whose driver publishes ``joint_states`` and takes the torques.
+applies to all, and topics, QoS and ``ros2 param`` are those of the separate executables.
+``--controllers`` leaves the plant out, for a real arm whose driver publishes
+``joint_states`` and takes the torques.
 
 Why: a message between processes costs ~100-150 us of CPU on each side (DDS, a thread wake-up
 per message), one between nodes of a process ~20 us (``bench/ros_loop.py``). Composition is

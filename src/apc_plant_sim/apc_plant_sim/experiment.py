@@ -380,8 +380,8 @@ def run_in_processes(
 
 
 def stop_processes(procs: Iterable[subprocess.Popen], timeout_s: float = 3.0) -> None:
-    """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends (ROS_WHEELS.md
-    warns of processes that ignore SIGTERM)."""
+    """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends, even a ROS
+    process that ignores SIGTERM (one that raised inside a callback can)."""
     procs = list(procs)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
         alive = [p for p in procs if p.poll() is None]

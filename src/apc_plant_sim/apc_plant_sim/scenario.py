@@ -242,7 +242,7 @@ def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I.
 
     As printed, the RLS has no wind-up guard (``trace_max < 0``); the corrected Eqs. 30, 33b
-    and 35 are used (DESIGN.md).
+    and 35 are used (their modules, ``rls``, ``linearize`` and ``optimal``, say why).
     """
     return {
         "q_position": 0.1,
