@@ -328,3 +328,8 @@ def with_inertia_error(robot: Robot, relative_error: Sequence[float]) -> Robot:
             body.mass, body.lever.copy(), body.inertia * (1.0 + err[i])
         )
     return _derived(robot, model)
+
+
+def alternating_error(n: int, magnitude: float = 0.1) -> np.ndarray:
+    """The paper's "+-10 %" pattern extended to n joints: +m, -m, +m, ... ."""
+    return np.array([magnitude if i % 2 == 0 else -magnitude for i in range(n)])
