@@ -32,7 +32,7 @@ EXECUTABLES: dict[str, tuple[str, ...]] = {
     "apc_core": ("recorder", "player"),
     "apc_feedforward": ("feedforward_node",),
     "apc_feedback": ("feedback_node",),
-    "apc_plant_sim": ("plant_node", "robot_sim", "arm", "experiment", "analyze"),
+    "apc_plant_sim": ("plant_node", "robot_sim", "arm", "experiment", "analyze", "apc_params"),
 }
 #: One executable of each package, run to ``--help``.
 HELP_RUNS = (

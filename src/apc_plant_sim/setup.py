@@ -26,6 +26,7 @@ setup(
             "arm = apc_plant_sim.arm:main",
             "experiment = apc_plant_sim.experiment:main",
             "analyze = apc_plant_sim.analyze:main",
+            "apc_params = apc_plant_sim.params_file:main",
         ],
     },
 )

@@ -152,5 +152,5 @@ def load(
 
 
 def _degrees(values: np.ndarray) -> tuple[float, ...]:
-    """Radians to degrees, rounded to 1e-6 deg so a written parameter file reads cleanly."""
-    return tuple(round(math.degrees(float(v)), 6) + 0.0 for v in values)
+    """Radians to degrees, rounded to 1e-3 deg so a written parameter file reads cleanly."""
+    return tuple(round(math.degrees(float(v)), 3) + 0.0 for v in values)

@@ -1,0 +1,111 @@
+"""``apc_params`` writes a parameter file for a URDF that loads back and starts the nodes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from numpy.testing import assert_allclose
+from rclpy.signals import SignalHandlerOptions
+
+from apc_core.defaults import load
+from apc_feedback.node import FeedbackNode
+from apc_feedforward.node import FeedforwardNode
+from apc_plant_sim.node import PlantNode
+from apc_plant_sim.params_file import main
+from apc_plant_sim.reproduce import example_robot_urdf
+from apc_plant_sim.scenario import CONFIG_DIR
+
+PANDA_FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
+
+
+def _arm(name: str) -> tuple[str, list[str]]:
+    if name == "panda":
+        return str(example_robot_urdf("panda_description/urdf/panda.urdf")), PANDA_FINGERS
+    return str(CONFIG_DIR / name), []
+
+
+@pytest.mark.parametrize("arm", ["puma560_3dof.urdf", "puma560.urdf", "panda"])
+def test_the_written_file_loads_back_and_starts_the_nodes(arm, tmp_path, capsys):
+    urdf, lock = _arm(arm)
+    out = tmp_path / "robot.yaml"
+    argv = ["--urdf", urdf, "--out", str(out)] + (["--lock-joints", *lock] if lock else [])
+    assert main(argv) == 0
+    told = capsys.readouterr().err.splitlines()
+    # One line per derived default, naming the parameter that holds it, then the file.
+    assert len(told) == 5 and "plant_node q_initial_deg = [" in told[0]
+    assert told[-1] == f"apc_params: wrote {out}"
+
+    robot, derived = load(urdf, lock_joints=lock)
+    values = yaml.safe_load(out.read_text())
+    shared = values["/**"]["ros__parameters"]
+    assert shared["robot_description_path"] == urdf
+    assert shared["inertia_error"] == list(derived.inertia_error)
+    assert shared.get("lock_joints", []) == lock
+    plant = values["plant_node"]["ros__parameters"]
+    assert plant == {
+        "q_initial_deg": list(derived.q_start_deg),
+        "payload.frame": derived.payload_frame,
+    }
+    goal = values["feedforward_node"]["ros__parameters"]["move.goal_deg"]
+    assert goal == list(derived.q_goal_deg)
+
+    context = rclpy.Context()
+    rclpy.init(
+        args=["--ros-args", "--params-file", str(out)],
+        context=context,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    nodes = []
+    try:
+        for make in (FeedforwardNode, FeedbackNode, PlantNode):
+            nodes.append(make(context=context))
+        feedforward, feedback, plant_node = nodes
+        for node in nodes:
+            assert node.joint_names == robot.joint_names
+        assert_allclose(np.rad2deg(plant_node.plant.q), derived.q_start_deg, atol=1e-9)
+        assert plant_node.get_parameter("payload.frame").value == derived.payload_frame
+        assert list(feedforward.get_parameter("move.goal_deg").value) == goal
+        error = list(feedback.get_parameter("inertia_error").value)
+        assert error == list(derived.inertia_error)
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_an_existing_file_is_kept_unless_forced(tmp_path, capsys):
+    out = tmp_path / "robot.yaml"
+    out.write_text("mine\n")
+    assert main(["--urdf", "puma560_3dof.urdf", "--out", str(out)]) == 2
+    assert out.read_text() == "mine\n"
+    assert "exists" in capsys.readouterr().err
+    assert main(["--urdf", "puma560_3dof.urdf", "--out", str(out), "--force"]) == 0
+    assert "plant_node:" in out.read_text()
+
+
+def test_a_urdf_apc_cannot_use_stops_with_one_line(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "apc_plant_sim.params_file", "--urdf", str(tmp_path / "no.urdf")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"apc_params: --urdf {tmp_path / 'no.urdf'}: URDF file not found: {tmp_path / 'no.urdf'}"
+    ]
+
+
+def test_without_out_the_file_goes_to_standard_output(capsys):
+    assert main(["--urdf", "puma560_3dof.urdf"]) == 0
+    text = capsys.readouterr().out
+    assert yaml.safe_load(text)["plant_node"]["ros__parameters"]["payload.frame"] == (
+        "wrist_center"
+    )
+    # A name in apc's config directory stays a name (the nodes find it there too).
+    assert "robot_description_path: puma560_3dof.urdf" in text
