@@ -35,12 +35,12 @@ from typing import Any
 import numpy as np
 
 from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
+from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import (
     PAPER_CASES,
-    make_feedback,
     paper_scenario,
     paper_settings,
     recommended_settings,
@@ -166,7 +166,7 @@ def run_long(
     )
     hold = FourThreeFour(poses[0], poses[0], segment_times=schedule.segment_times)
     feedforward = Feedforward(controller.model, hold, period, 0)
-    feedback = make_feedback("adaptive", controller, period, dict(settings))
+    feedback = make_law("adaptive", controller, period, dict(settings))
     feedback.reset()
     n = plant.n_joints
     total = round(seconds / period)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -9,9 +11,10 @@ import pytest
 from apc_core.robot import load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
+from apc_feedback.laws import make_law
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import one_step_control
-from apc_plant_sim.scenario import CONFIG_DIR, make_feedback
+from apc_plant_sim.scenario import CONFIG_DIR
 
 rng = np.random.default_rng(7)
 
@@ -149,19 +152,37 @@ def test_one_step_law_leaves_an_offset_under_a_constant_bias(controller_robot):
     assert offsets[0] / offsets[1] == pytest.approx(10.0, rel=0.05)
 
 
-def test_adaptive_config_validation():
+@pytest.mark.parametrize(
+    ("cls", "kwargs", "field", "words"),
+    [
+        (AdaptiveConfig, {"rho": 1.5}, "rho", "out of range"),
+        (AdaptiveConfig, {"r": 0.0}, "r", "out of range"),
+        (AdaptiveConfig, {"q_position": -1.0}, "q_position", "out of range"),
+        (AdaptiveConfig, {"q_velocity": math.nan}, "q_velocity", "out of range"),
+        (AdaptiveConfig, {"q_position": "x"}, "q_position", "must be a number"),
+        (AdaptiveConfig, {"alpha": True}, "alpha", "must be a number"),
+        (AdaptiveConfig, {"horizon": 1.5}, "horizon", "must be an integer"),
+        (AdaptiveConfig, {"horizon": 0}, "horizon", "out of range"),
+        (AdaptiveConfig, {"control_form": "bogus"}, "control_form", "'exact' or 'printed'"),
+        (AdaptiveConfig, {"forgetting": "bogus"}, "forgetting", "bogus"),
+        (AdaptiveConfig, {"period": 0.0}, "period", "> 0"),
+        (PdGains, {"kp": -1.0}, "kp", "out of range"),
+        (PdGains, {"kv": math.inf}, "kv", "out of range"),
+    ],
+)
+def test_settings_validation_names_the_field(cls, kwargs, field, words):
+    """The dataclass is the one validation: the error carries the field, for the node."""
+    with pytest.raises(FeedbackError, match=words) as info:
+        cls(**kwargs)
+    assert info.value.field == field
+    assert str(info.value).startswith(field)
+
+
+def test_settings_take_integers_for_floats_and_refuse_unknown_keys():
+    assert AdaptiveConfig(q_position=200).q_position == 200.0
+    assert isinstance(PdGains(kp=200).kp, float)
     with pytest.raises(FeedbackError, match="unknown adaptive-controller parameter 'rh0'"):
         AdaptiveConfig.from_dict({"rh0": 0.9})
-    with pytest.raises(FeedbackError, match="rho"):
-        AdaptiveConfig(rho=1.5)
-    with pytest.raises(FeedbackError, match="r must be > 0"):
-        AdaptiveConfig(r=0.0)
-    with pytest.raises(FeedbackError, match="q_position"):
-        AdaptiveConfig(q_position=-1.0)
-    with pytest.raises(FeedbackError, match="control_form"):
-        AdaptiveConfig(control_form="bogus")  # type: ignore[arg-type]
-    with pytest.raises(FeedbackError, match="period"):
-        AdaptiveConfig(period=0.0)
 
 
 @pytest.mark.parametrize(
@@ -173,16 +194,16 @@ def test_adaptive_config_validation():
         ("none", NoFeedback),
     ],
 )
-def test_make_feedback_by_name(controller_robot, kind, cls):
-    assert isinstance(make_feedback(kind, controller_robot, 0.01), cls)
+def test_make_law_by_name(controller_robot, kind, cls):
+    assert isinstance(make_law(kind, controller_robot, 0.01), cls)
 
 
-def test_make_feedback_rejects_unknown():
+def test_make_law_rejects_unknown():
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     with pytest.raises(FeedbackError, match="controller must be one of"):
-        make_feedback("lqr", robot, 0.01)
+        make_law("lqr", robot, 0.01)
     with pytest.raises(FeedbackError, match="unknown gain parameter 'kd'"):
-        make_feedback("pd", robot, 0.01, {"kd": 1.0})
+        make_law("pd", robot, 0.01, {"kd": 1.0})
 
 
 def test_reconfigure_takes_new_weights_and_keeps_the_identified_model(controller_robot):

@@ -10,7 +10,8 @@ import pytest
 from apc_core.robot import load_robot
 from apc_feedback.baselines import PID, PidGains
 from apc_feedback.controller import FeedbackError
-from apc_plant_sim.scenario import CONFIG_DIR, make_feedback, paper_scenario, run_offline
+from apc_feedback.laws import make_law
+from apc_plant_sim.scenario import CONFIG_DIR, paper_scenario, run_offline
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +26,7 @@ def _update(law, k, q, qd, q_d, qd_d):
 
 def test_tuning_rule_puts_three_poles_at_the_bandwidth(robot):
     """Kp = 3 J w^2, Kd = 3 J w, Ki = J w^3 with J the model's D(q_d(0))_ii."""
-    law = make_feedback("pid", robot, 0.01, {"bandwidth": 8.0})
+    law = make_law("pid", robot, 0.01, {"bandwidth": 8.0})
     q0 = np.array([0.1, -0.7, -0.8])
     _update(law, 0, q0, np.zeros(3), q0, np.zeros(3))
     J = pin.crba(robot.model, robot.model.createData(), q0).diagonal()
@@ -69,8 +70,8 @@ def test_bad_gains_are_named(robot):
     with pytest.raises(FeedbackError, match="bandwidth"):
         PidGains(bandwidth=0.0)
     with pytest.raises(FeedbackError, match="unknown gain parameter 'kp'"):
-        make_feedback("pid", robot, 0.01, {"kp": 1.0})
-    law = make_feedback("pid", robot, 0.01, {"p": [1, 2], "i": [1, 2], "d": [1, 2]})
+        make_law("pid", robot, 0.01, {"kp": 1.0})
+    law = make_law("pid", robot, 0.01, {"p": [1, 2], "i": [1, 2], "d": [1, 2]})
     with pytest.raises(FeedbackError, match="pid p needs 3 values"):
         _update(law, 0, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
 

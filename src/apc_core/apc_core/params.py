@@ -4,35 +4,37 @@ Each node lists its parameters as :class:`Param` rows (name, default, descriptio
 range, read-only), the way ros2_controllers' JTC declares its parameter YAML. :func:`declare`
 declares them all with ``ParameterDescriptor``\\ s and returns a plain ``dict``; the node's pure
 ``from_dict`` builds the frozen config and rejects a bad value with one line naming it.
+
+A plain config dataclass (no rclpy: this module imports rclpy only where it declares) is the one
+source of its settings: each field made with :func:`setting` carries its default, description
+and range, :func:`check_settings` is its validation, and :func:`params_from` makes the node's
+:class:`Param` rows from it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-)
-from rclpy.node import Node
-from rclpy.parameter import Parameter
+if TYPE_CHECKING:
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.node import Node
 
 
 class ConfigError(ValueError):
     """A parameter value that stops a node at start-up; the message names the parameter."""
 
 
-_TYPES = {
-    bool: ParameterType.PARAMETER_BOOL,
-    int: ParameterType.PARAMETER_INTEGER,
-    float: ParameterType.PARAMETER_DOUBLE,
-    str: ParameterType.PARAMETER_STRING,
-}
+class SettingError(ValueError):
+    """A bad value of a config dataclass's setting; ``field`` names the setting (None when no
+    single one is at fault), so that a node can name its parameter without parsing the text."""
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,7 @@ class Param:
         Element type of an array parameter (needed when the default is empty).
     dynamic_typing : bool
         Let rclpy accept a value of another type (e.g. ``ros2 param set ... 200``, an integer,
-        for a double); the node must then check the type itself (see :func:`check_number`).
+        for a double); the node must then check the type itself (see :func:`check_settings`).
     """
 
     name: str
@@ -68,6 +70,19 @@ class Param:
     dynamic_typing: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
+        from rcl_interfaces.msg import (
+            FloatingPointRange,
+            IntegerRange,
+            ParameterDescriptor,
+            ParameterType,
+        )
+
+        types = {
+            bool: ParameterType.PARAMETER_BOOL,
+            int: ParameterType.PARAMETER_INTEGER,
+            float: ParameterType.PARAMETER_DOUBLE,
+            str: ParameterType.PARAMETER_STRING,
+        }
         desc = ParameterDescriptor(
             name=self.name,
             description=self.description,
@@ -83,7 +98,7 @@ class Param:
                 else ParameterType.PARAMETER_DOUBLE_ARRAY
             )
         else:
-            desc.type = _TYPES[type(value)]
+            desc.type = types[type(value)]
         if self.low is not None and self.high is not None:
             if isinstance(value, float):
                 desc.floating_point_range = [
@@ -104,6 +119,8 @@ def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
     are refused by rclpy at declaration; that error is turned
     into a :class:`ConfigError` naming the parameter.
     """
+    from rclpy.parameter import Parameter
+
     values: dict[str, Any] = {}
     for p in params:
         try:
@@ -125,26 +142,67 @@ def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
     return values
 
 
-def check_number(param: Param, value: Any) -> float:
-    """``value`` as a float within ``param``'s range, or :class:`ConfigError` naming it.
-
-    Integers are accepted for a double (``ros2 param set`` sends ``200`` as an integer);
-    booleans, strings, arrays and unset values are not.
-    """
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(
-            f"parameter '{param.name}': must be a number, got {type(value).__name__} {value!r}"
-        )
-    number = float(value)
-    if not math.isfinite(number):
-        raise ConfigError(f"parameter '{param.name}': must be finite, got {number}")
-    if param.low is not None and param.high is not None and not param.low <= number <= param.high:
-        raise ConfigError(
-            f"parameter '{param.name}': {number:g} is outside [{param.low:g}, {param.high:g}]"
-        )
-    return number
-
-
 def subset(values: Mapping[str, Any], prefix: str) -> dict[str, Any]:
     """``{"adaptive.rho": 1}`` with prefix ``"adaptive."`` -> ``{"rho": 1}``."""
     return {k[len(prefix) :]: v for k, v in values.items() if k.startswith(prefix)}
+
+
+def setting(
+    default: Any,
+    description: str,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    runtime: bool = False,
+) -> Any:
+    """A config dataclass field with what its node parameter needs, written once.
+
+    ``low``/``high`` is the inclusive range :func:`check_settings` enforces (and the ROS
+    descriptor shows); ``runtime`` makes the parameter settable while the node runs.
+    """
+    meta = {"description": description, "low": low, "high": high, "runtime": runtime}
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def _settings(cls: type) -> list[dataclasses.Field]:
+    return [f for f in dataclasses.fields(cls) if "description" in f.metadata]
+
+
+def check_settings(config: Any, error: type[SettingError] = SettingError) -> None:
+    """Validate every :func:`setting` field of the dataclass instance ``config`` (call it from
+    ``__post_init__``): a number is a number (an integer for an integer setting; an integer is
+    stored as a float for a float setting) within its range; ``error`` names the field."""
+    for f in _settings(type(config)):
+        value, low, high = getattr(config, f.name), f.metadata["low"], f.metadata["high"]
+        if low is None or isinstance(f.default, bool | str):
+            continue
+        integer = isinstance(f.default, int)
+        kinds = int if integer else int | float
+        if isinstance(value, bool) or not isinstance(value, kinds):
+            what = "an integer" if integer else "a number"
+            raise error(
+                f"{f.name} must be {what}, got {type(value).__name__} {value!r}", field=f.name
+            )
+        if not integer:
+            value = float(value)
+            object.__setattr__(config, f.name, value)
+        if not (math.isfinite(value) and low <= value <= high):
+            raise error(f"{f.name} = {value:g} is out of range [{low:g}, {high:g}]", field=f.name)
+
+
+def params_from(cls: type, prefix: str) -> tuple[Param, ...]:
+    """The node's :class:`Param` rows of the config dataclass ``cls``'s :func:`setting` fields,
+    named ``<prefix><field>``; a runtime setting is dynamically typed (``ros2 param set`` may
+    send an integer for a double) and checked by the dataclass when set."""
+    return tuple(
+        Param(
+            f"{prefix}{f.name}",
+            f.default,
+            f.metadata["description"],
+            f.metadata["low"],
+            f.metadata["high"],
+            read_only=not f.metadata["runtime"],
+            dynamic_typing=f.metadata["runtime"],
+        )
+        for f in _settings(cls)
+    )

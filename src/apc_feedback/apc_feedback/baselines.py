@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from apc_core.params import check_settings, setting
 from apc_feedback.controller import FeedbackError, FeedbackLaw, FeedbackOutput
 
 
@@ -33,14 +34,23 @@ class PdGains:
     ("near critically damped": ``Kv = 2 sqrt(Kp)``).
     """
 
-    kp: float = 100.0
-    kv: float = 20.0
+    kp: float = setting(
+        100.0,
+        "Kp of computed torque (1/s^2) or PD (N m/rad); settable at run time",
+        0.0,
+        1e9,
+        runtime=True,
+    )
+    kv: float = setting(
+        20.0,
+        "Kv of computed torque (1/s) or PD (N m s/rad); settable at run time",
+        0.0,
+        1e9,
+        runtime=True,
+    )
 
     def __post_init__(self) -> None:
-        for name in ("kp", "kv"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0.0):
-                raise FeedbackError(f"{name} must be finite and >= 0, got {value}")
+        check_settings(self, FeedbackError)
 
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> PdGains:
@@ -50,7 +60,20 @@ class PdGains:
         return PdGains(**dict(values))
 
 
-class ComputedTorque(FeedbackLaw):
+class _RuntimeGains:
+    """A law whose :class:`PdGains` can change while it runs (it learns nothing to keep)."""
+
+    gains: PdGains
+
+    @property
+    def settings(self) -> PdGains:
+        return self.gains
+
+    def reconfigure(self, settings: PdGains) -> None:
+        self.gains = settings
+
+
+class ComputedTorque(_RuntimeGains, FeedbackLaw):
     """Computed-torque control, Eq. 36, on the controller's model."""
 
     kind = "computed_torque"
@@ -70,7 +93,7 @@ class ComputedTorque(FeedbackLaw):
         return FeedbackOutput(du=np.array(tau, dtype=float) - u_n)
 
 
-class PD(FeedbackLaw):
+class PD(_RuntimeGains, FeedbackLaw):
     """Joint-space PD on top of the nominal torque: ``du = Kp e + Kv e'``."""
 
     kind = "pd"

@@ -23,7 +23,8 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from apc_feedback.linearize import SeriesForm, initial_model
+from apc_core.params import SettingError, check_settings, setting
+from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
     OneStepControl,
     receding_horizon_control,
@@ -32,8 +33,8 @@ from apc_feedback.optimal import (
 from apc_feedback.rls import Rls, RlsConfig, RlsError
 
 
-class FeedbackError(ValueError):
-    """Bad feedback configuration or input; the message names the parameter."""
+class FeedbackError(SettingError):
+    """Bad feedback configuration or input; ``field`` names a bad setting."""
 
 
 class FeedbackOutput(NamedTuple):
@@ -69,6 +70,16 @@ class FeedbackLaw(ABC):
 
     def __init__(self, n_joints: int) -> None:
         self.n_joints = n_joints
+
+    @property
+    def settings(self) -> Any:
+        """The law's settings dataclass (None for a law without settings)."""
+        return None
+
+    def reconfigure(self, settings: Any) -> None:
+        """Take new run-time settings (the fields made with ``runtime=True``) from the next
+        sample on, keeping what the law has learnt."""
+        raise FeedbackError(f"controller {self.kind!r} has no run-time settings")
 
     @abstractmethod
     def reset(self) -> None:
@@ -150,50 +161,77 @@ class AdaptiveConfig:
     """
 
     period: float = 0.010
-    q_position: float = 0.1
-    q_velocity: float = 0.1
-    r: float = 1e-6
-    rho: float = 0.95
-    alpha: float = 1.5e5
-    forgetting: Literal["exponential", "printed"] = "exponential"
-    trace_max: float = 0.0
-    control_form: Literal["exact", "printed"] = "exact"
-    initial_model: SeriesForm = "corrected"
-    identify_with: Literal["applied", "commanded"] = "applied"
-    horizon: int = 1
-    q_integral: float = 0.0
-    integral_limit: float = 0.05
-    project_g: bool = False
+    q_position: float = setting(
+        0.1,
+        "Q weight of the position error, Eq. 34 (1/rad^2); settable at run time",
+        0.0,
+        1e12,
+        runtime=True,
+    )
+    q_velocity: float = setting(
+        0.1, "Q weight of the velocity error, Eq. 34; settable at run time", 0.0, 1e12, runtime=True
+    )
+    r: float = setting(
+        1e-6,
+        "R weight of the torque, Eq. 34 (1/(N m)^2), > 0; settable at run time",
+        1e-15,
+        1e12,
+        runtime=True,
+    )
+    rho: float = setting(0.95, "RLS forgetting factor rho, Eqs. 29-31; 0 < rho <= 1", 1e-6, 1.0)
+    alpha: float = setting(1.5e5, "P(0) = alpha I, Eq. 32", 1e-12, 1e15)
+    forgetting: Literal["exponential", "printed"] = setting(
+        "exponential",
+        "Eq. 30: 'exponential' (P divided by rho) or 'printed' (as printed, never forgets)",
+    )
+    trace_max: float = setting(
+        0.0,
+        "RLS wind-up guard, bound on trace(P): 0 = trace(P(0)) = alpha (3n+1); < 0 = off",
+        -1.0,
+        1e30,
+    )
+    control_form: Literal["exact", "printed"] = setting(
+        "exact", "Eq. 35: 'exact' minimiser -(R+G'QG)^-1 G'Q(F x + w) or 'printed' G'QF(x + w)"
+    )
+    initial_model: Literal["corrected", "printed"] = setting(
+        "corrected", "Eq. 33b series: 'corrected' (T^2/2, T^3/6) or 'printed' (T^2, T^3/2)"
+    )
+    identify_with: Literal["applied", "commanded"] = setting(
+        "applied",
+        "du(k-1) in the regressor: 'applied' (joint_states effort - u_n) or 'commanded'",
+    )
+    horizon: int = setting(
+        1,
+        "steps N of the optimal control over the identified model; 1 = the paper's Eq. 34",
+        1,
+        200,
+    )
+    q_integral: float = setting(
+        0.0,
+        "weight of the integrated position error (integral action); 0 = off (the paper)",
+        0.0,
+        1e15,
+    )
+    integral_limit: float = setting(0.05, "anti-windup bound on the integral (rad s)", 1e-9, 1e3)
+    project_g: bool = setting(
+        False,
+        "refuse RLS steps that make G's velocity block (~T D^-1) indefinite; put the jump in w",
+    )
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.period) and self.period > 0.0):
-            raise FeedbackError(f"period must be > 0 s, got {self.period}")
-        for name in ("q_position", "q_velocity"):
+            raise FeedbackError(f"period must be > 0 s, got {self.period}", field="period")
+        check_settings(self, FeedbackError)
+        for name, choices in (
+            ("forgetting", ("exponential", "printed")),
+            ("control_form", ("exact", "printed")),
+            ("initial_model", ("corrected", "printed")),
+            ("identify_with", ("applied", "commanded")),
+        ):
             value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0.0):
-                raise FeedbackError(f"{name} must be >= 0 (Q positive semidefinite), got {value}")
-        if not (np.isfinite(self.r) and self.r > 0.0):
-            raise FeedbackError(f"r must be > 0 (R positive definite), got {self.r}")
-        if self.control_form not in ("exact", "printed"):
-            raise FeedbackError(
-                f"control_form must be 'exact' or 'printed', got {self.control_form!r}"
-            )
-        if self.initial_model not in ("corrected", "printed"):
-            raise FeedbackError(
-                f"initial_model must be 'corrected' or 'printed', got {self.initial_model!r}"
-            )
-        if self.identify_with not in ("applied", "commanded"):
-            raise FeedbackError(
-                f"identify_with must be 'applied' or 'commanded', got {self.identify_with!r}"
-            )
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
-            raise FeedbackError(f"horizon must be an integer >= 1, got {self.horizon!r}")
-        if not (np.isfinite(self.q_integral) and self.q_integral >= 0.0):
-            raise FeedbackError(f"q_integral must be >= 0, got {self.q_integral}")
-        if not (np.isfinite(self.integral_limit) and self.integral_limit > 0.0):
-            raise FeedbackError(f"integral_limit must be > 0, got {self.integral_limit}")
-        if not np.isfinite(self.trace_max):
-            raise FeedbackError(f"trace_max must be finite, got {self.trace_max}")
+            if value not in choices:
+                either = " or ".join(map(repr, choices))
+                raise FeedbackError(f"{name} must be {either}, got {value!r}", field=name)
         try:
             self.rls_config()
         except RlsError as exc:
@@ -266,6 +304,10 @@ class AdaptiveFeedback(FeedbackLaw):
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
         self._Q_aug = np.diag(np.concatenate([q_diagonal, np.full(n, config.q_integral)]))
         self._identify_applied = config.identify_with == "applied"
+
+    @property
+    def settings(self) -> AdaptiveConfig:
+        return self.config
 
     def reconfigure(self, config: AdaptiveConfig) -> None:
         """Take new weights (``q_position``, ``q_velocity``, ``r``) at the next sample and keep

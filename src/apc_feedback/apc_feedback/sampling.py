@@ -117,6 +117,12 @@ class Step:
     setpoint: wire.Setpoint
     applied: np.ndarray | None
 
+    def law_inputs(self) -> tuple:
+        """``(q, qd, q_d, qd_d, qdd_d, u_n, applied)``: what ``FeedbackLaw.update`` takes
+        after ``k``."""
+        s, d = self.state, self.setpoint
+        return (s.position, s.velocity, d.q, d.qd, d.qdd, d.u_n, self.applied)
+
 
 @dataclass(frozen=True, slots=True)
 class Decision:

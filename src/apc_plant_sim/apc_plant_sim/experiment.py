@@ -32,8 +32,8 @@ from rclpy.parameter import Parameter
 
 from apc_core.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
 from apc_core.params import ConfigError
+from apc_feedback.laws import CONTROLLER_KINDS
 from apc_plant_sim.scenario import (
-    CONTROLLERS,
     PAPER_CASES,
     PRESETS,
     Scenario,
@@ -438,7 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="experiment", description=__doc__.split("\n\n")[0] if __doc__ else None
     )
     parser.add_argument("--case", choices=sorted(PAPER_CASES), default="c", help="paper load case")
-    parser.add_argument("--controller", choices=CONTROLLERS, default="adaptive")
+    parser.add_argument("--controller", choices=CONTROLLER_KINDS, default="adaptive")
     parser.add_argument(
         "--alpha", type=float, default=1.5e5, help="P(0) = alpha I (paper: 1500, 150000)"
     )

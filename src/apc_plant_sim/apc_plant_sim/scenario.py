@@ -1,8 +1,8 @@
 """What a run is: arm, payload, model error, move, timing and controller, and how to build it.
 
 A :class:`Scenario` is plain data (loadable from YAML or argparse); :func:`build` turns it into
-the plant's robot, the controller's robot and the plan; :func:`make_feedback` builds a feedback
-law by name. The paper's three cases are :func:`paper_scenario`.
+the plant's robot, the controller's robot and the plan (the feedback law by name is
+:func:`apc_feedback.laws.make_law`). The paper's three cases are :func:`paper_scenario`.
 
 Angles
 ------
@@ -32,8 +32,7 @@ from apc_core.robot import (
     with_inertia_error,
     with_payload,
 )
-from apc_feedback.baselines import PD, PID, ComputedTorque, NoFeedback, PdGains, PidGains
-from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.effects import ArmEffects, PhysicalArm
@@ -46,7 +45,6 @@ CONFIG_DIR = REPO_ROOT / "config"
 PUMA_3DOF_URDF = CONFIG_DIR / "puma560_3dof.urdf"
 PAPER_JOINT_SIGN = np.array([1.0, -1.0, -1.0])
 PAPER_CASES = {"a": 0.0, "b": PAPER_MAX_PAYLOAD_KG / 2.0, "c": PAPER_MAX_PAYLOAD_KG}
-CONTROLLERS = ("adaptive", "computed_torque", "pd", "pid", "none")
 
 
 class ScenarioError(ValueError):
@@ -173,32 +171,6 @@ def build(scenario: Scenario) -> Built:
     return Built(plant_robot, controller_robot, robot, trajectory, plant_config)
 
 
-def make_feedback(
-    kind: str, controller_robot: Robot, period: float, params: Mapping[str, Any] | None = None
-) -> FeedbackLaw:
-    """A feedback law by name: ``adaptive``, ``computed_torque``, ``pd``, ``pid`` or ``none``.
-
-    ``params`` are the law's settings (:class:`AdaptiveConfig` fields for ``adaptive``,
-    ``kp``/``kv`` for ``computed_torque`` and ``pd``, :class:`PidGains` fields for ``pid``).
-    """
-    params = dict(params or {})
-    model = controller_robot.model
-    if kind == "adaptive":
-        params.setdefault("period", period)
-        return AdaptiveFeedback(model, AdaptiveConfig.from_dict(params))
-    if kind == "computed_torque":
-        return ComputedTorque(model, PdGains.from_dict(params))
-    if kind == "pd":
-        return PD(model.nv, PdGains.from_dict(params))
-    if kind == "pid":
-        return PID(model, controller_robot.effort_limit, period, PidGains.from_dict(params))
-    if kind == "none":
-        if params:
-            raise FeedbackError(f"controller 'none' takes no parameters, got {sorted(params)}")
-        return NoFeedback(model.nv)
-    raise FeedbackError(f"controller must be one of {', '.join(CONTROLLERS)}, got {kind!r}")
-
-
 def run_offline(
     scenario: Scenario,
     controller: str,
@@ -217,7 +189,7 @@ def run_offline(
     else:
         plant = PhysicalArm(initial, built.plant_config, effects, q0, qd0)
     feedforward = Feedforward(built.controller_robot.model, built.trajectory, scenario.period)
-    feedback = make_feedback(controller, built.controller_robot, scenario.period, params)
+    feedback = make_law(controller, built.controller_robot, scenario.period, params)
     result = run_closed_loop(
         plant,
         feedforward,
@@ -255,7 +227,8 @@ def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
 
 
 def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """Within the paper's structure, what the measurements recommend (bench/preset_sweep.py).
+    """Within the paper's structure, what the measurements recommend (bench/preset_sweep.py):
+    the paper's settings (R, rho, P(0)) with these changes.
 
     Same RLS-identified perturbation model and optimal control of it, same feedforward, with
     changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
@@ -266,11 +239,9 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     picked up mid-motion otherwise flips Ĝ and the law saturates).
     """
     return {
+        **paper_settings(alpha),
         "q_position": 2000.0,
         "q_velocity": 1.0,
-        "r": 1e-6,
-        "rho": 0.95,
-        "alpha": alpha,
         "trace_max": 0.0,
         "horizon": 3,
         "q_integral": 1e6,
@@ -290,13 +261,11 @@ def joint_sign_to_paper(n: int) -> np.ndarray:
 
 
 __all__: Sequence[str] = (
-    "CONTROLLERS",
     "PAPER_CASES",
     "Built",
     "Scenario",
     "ScenarioError",
     "build",
-    "make_feedback",
     "paper_scenario",
     "paper_settings",
     "run_offline",
