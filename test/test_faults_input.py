@@ -921,8 +921,8 @@ def test_fuzz_extreme_goals_never_put_a_non_finite_value_on_the_wire(graph):
             step()
             queued = counter(ff, "goals_accepted") - counter(ff, "goals_started")
             rejected_late = counter(ff, "rejected.feedforward/trajectory")
-            assert ff.feedforward is not None
-            if state["k"] >= ff.feedforward.end_k() and queued <= rejected_late:
+            assert ff.goals.feedforward is not None
+            if state["k"] >= ff.goals.feedforward.end_k() and queued <= rejected_late:
                 break
         for node in (ff, fb):
             assert errors(node) == 0, node.diagnostics.counters

@@ -1,0 +1,261 @@
+"""The feedforward's plan and what it sends when: plain classes, no rclpy, no clock.
+
+- :class:`GoalQueue` owns the plan: it starts at the first measured position (the first move
+  or a hold), queues goals (checked when they arrive, planned from the end of the motion before
+  them when they start), and holds the last set point after the last motion or when a plan
+  cannot be published.
+- :class:`Lookahead` decides which samples answer a joint state: every ``j`` up to
+  ``k + lookahead`` not sent yet, everything again for a resent state, nothing for a stale one.
+
+Both are told sample indices and stamps (integer ns); the node maps their outcomes to topics,
+counters and log lines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar
+
+import numpy as np
+import pinocchio as pin
+
+from apc_core import wire
+from apc_feedforward.nominal import Feedforward, Setpoint
+from apc_feedforward.trajectory import (
+    FourThreeFour,
+    Quintic,
+    Trajectory,
+    TrajectoryError,
+    Waypoints,
+)
+
+#: Goals waiting for the current motion to end; one more is rejected (a flood is not a plan).
+MAX_QUEUED_GOALS = 100
+#: A goal's plan is checked on at most this many sample times before it is accepted.
+PLAN_CHECK_SAMPLES = 10_000
+
+R = TypeVar("R")
+
+
+@dataclass
+class Sampled(Generic[R]):
+    """What :meth:`GoalQueue.sample` did for one sample.
+
+    Attributes
+    ----------
+    setpoint, rendered :
+        The set point of the sample and what ``render`` made of it; both None if not even a
+        hold could be rendered (``failed`` says why).
+    started : list of float
+        Durations (s) of the goals that started at this sample.
+    refused : list of ValueError
+        Goals dropped when they were to start (their plan from the actual start is unusable).
+    plan_error : ValueError or None
+        Why the plan was dropped for a hold of the last set point at this sample.
+    failed : ValueError or None
+        Why even the hold could not be rendered.
+    """
+
+    setpoint: Setpoint | None = None
+    rendered: R | None = None
+    started: list[float] = field(default_factory=list)
+    refused: list[ValueError] = field(default_factory=list)
+    plan_error: ValueError | None = None
+    failed: ValueError | None = None
+
+
+class GoalQueue:
+    """The feedforward's plan: the first move, queued goals, and holds.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        The controller's model (nominal torques, Eqs. 2-8).
+    period : float
+        Sampling period T (s).
+    joint_names : sequence of str
+        Names of the model's joints (in error messages).
+    position_limits : (lower, upper)
+        The URDF's joint position limits; waypoints outside them are refused. Arrays of
+        another shape than a goal's positions mean no limits.
+    first_goal : (n,) ndarray or None
+        Goal of the first move (rad), a 4-3-4 from the first measured position; None holds
+        that position until a goal arrives.
+    move : dict
+        ``FourThreeFour`` keywords of the first move (segment_times, lift_off, set_down).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        period: float,
+        joint_names: Sequence[str],
+        position_limits: tuple[np.ndarray, np.ndarray],
+        *,
+        first_goal: np.ndarray | None = None,
+        move: dict[str, Any] | None = None,
+    ) -> None:
+        self.model = model
+        self.period = period
+        self.joint_names = list(joint_names)
+        self.position_limits = position_limits
+        self.first_goal = first_goal
+        self.move = dict(move or {})
+        self.feedforward: Feedforward | None = None
+        self.queued: list[wire.Waypoints] = []
+        self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
+
+    # -- goals ----------------------------------------------------------------------------------
+    def add(self, goal: wire.Waypoints) -> None:
+        """Queue a goal; raises ValueError (WireError, TrajectoryError) naming what is wrong."""
+        self._check_limits(goal.positions)
+        if len(self.queued) >= MAX_QUEUED_GOALS:
+            raise wire.WireError(f"points: {MAX_QUEUED_GOALS} goals already queued")
+        # Check the goal now (timing, shapes, speed) with its first point as a stand-in start;
+        # it is planned for real from the end of the motion before it when it starts.
+        self._check_plan(self._plan(goal.positions[0], goal))
+        self.queued.append(goal)
+
+    @staticmethod
+    def _plan(start: np.ndarray, goal: wire.Waypoints) -> Trajectory:
+        return Waypoints(
+            start,
+            goal.times_s,
+            goal.positions,
+            velocities=goal.velocities,
+            accelerations=goal.accelerations,
+        )
+
+    def _check_limits(self, positions: np.ndarray) -> None:
+        """Refuse waypoints outside the URDF's joint position limits."""
+        lower, upper = self.position_limits
+        if lower.shape != positions.shape[1:] or upper.shape != positions.shape[1:]:
+            return  # a model without position limits
+        outside = (positions < lower) | (positions > upper)
+        if outside.any():
+            j, i = (int(v) for v in np.argwhere(outside)[0])
+            raise wire.WireError(
+                f"points[{j}].positions: {positions[j, i]:.6g} rad at joint "
+                f"{self.joint_names[i]!r} is outside the URDF limits "
+                f"[{lower[i]:.6g}, {upper[i]:.6g}]"
+            )
+
+    def _check_plan(self, plan: Trajectory) -> None:
+        """Refuse a plan whose set points could not go on the wire (beyond its bound)."""
+        count = int(min(np.ceil(plan.duration / self.period) + 1, PLAN_CHECK_SAMPLES))
+        times = np.linspace(0.0, plan.duration, max(count, 2))
+        for name, values in zip(
+            ("positions", "velocities", "accelerations"), plan.sample_many(times), strict=True
+        ):
+            peak = float(np.max(np.abs(values)))
+            if not peak <= wire.DEFAULT_MAX_ABS:  # also NaN
+                raise TrajectoryError(
+                    f"points: the planned {name} reach {peak:.3g} (more than "
+                    f"{wire.DEFAULT_MAX_ABS:g}); the goal is too fast for its distance"
+                )
+
+    # -- samples --------------------------------------------------------------------------------
+    def sample(self, k: int, position: np.ndarray, render: Callable[[Setpoint], R]) -> Sampled[R]:
+        """Set point ``k`` rendered for the wire by ``render`` (which raises ValueError for a
+        set point the wire refuses); on a plan that cannot be published, the last set point
+        held. ``position`` is the measured position of the newest joint state: the start of
+        the plan at the first sample, the hold if nothing was rendered yet."""
+        out: Sampled[R] = Sampled()
+        try:
+            self._compute(k, position, render, out)
+        except ValueError as exc:  # WireError, TrajectoryError, FeedforwardError
+            # The plan cannot be published (e.g. a motion too fast for the wire's bound): drop
+            # it and hold the last set point, so the loop keeps its nominal torque.
+            out.plan_error = exc
+            hold = self._last_q if self._last_q is not None else position
+            self.feedforward = Feedforward(
+                self.model, Quintic(hold, hold, self.period), self.period, k
+            )
+            try:
+                self._compute(k, position, render, out)
+            except ValueError as exc2:
+                out.failed = exc2
+        return out
+
+    def _compute(
+        self, k: int, position: np.ndarray, render: Callable[[Setpoint], R], out: Sampled[R]
+    ) -> None:
+        if self.feedforward is None:
+            if self.first_goal is not None:
+                plan: Trajectory = FourThreeFour(position, self.first_goal, **self.move)
+            else:
+                plan = Quintic(position, position, self.period)
+            self.feedforward = Feedforward(self.model, plan, self.period, k)
+        self._advance(k, out)
+        sp = self.feedforward.sample(k)
+        out.rendered = render(sp)
+        out.setpoint = sp
+        self._last_q = sp.q
+
+    def _advance(self, k: int, out: Sampled[Any]) -> None:
+        """Start the next queued goal once the current motion has ended.
+
+        A goal is planned when it becomes active, from the last set point of the motion before
+        it, so goals can be queued before the first joint state or during a motion.
+        """
+        ff = self.feedforward
+        while self.queued and ff is not None and k >= ff.end_k():
+            goal = self.queued.pop(0)
+            start = ff.trajectory.sample(ff.trajectory.duration)[0]
+            try:
+                plan = self._plan(start, goal)
+                self._check_plan(plan)
+            except ValueError as exc:  # TrajectoryError, or a plan that cannot be published
+                out.refused.append(exc)
+                continue
+            ff.set_trajectory(plan, max(k, ff.end_k()))
+            out.started.append(plan.duration)
+
+
+@dataclass(frozen=True)
+class Due:
+    """The answer to one joint state: ``samples`` to compute and send, in order, or (for a
+    state sent again) the set points already sent for it, to send again."""
+
+    samples: range
+    resend: tuple[Setpoint, ...] | None = None
+
+
+class Lookahead:
+    """Which samples answer which joint state.
+
+    A joint state stamped ``kT`` is answered with every sample ``j <= k + lookahead`` not sent
+    yet (the plan does not depend on the state, so samples ahead can leave at once). The same
+    stamp again (a lockstep resend) is answered with everything sent for ``k`` or later, again;
+    an older stamp is stale.
+    """
+
+    def __init__(self, lookahead: int) -> None:
+        self.lookahead = int(lookahead)
+        self._last_stamp: int | None = None  # newest joint state handled
+        self._sent: dict[int, Setpoint] = {}  # samples sent for it, for a resend
+        self._next_k: int | None = None  # first sample not sent yet
+
+    def due(self, stamp_ns: int, k: int) -> Due:
+        """Samples answering the joint state stamped ``stamp_ns`` (sample ``k``); raises
+        WireError for a stale stamp."""
+        last = self._last_stamp
+        if last is not None and stamp_ns <= last:
+            if stamp_ns == last:
+                return Due(range(0), tuple(self._sent[j] for j in sorted(self._sent)))
+            raise wire.WireError(
+                f"header.stamp: {stamp_ns} ns is stale (sample {last} ns already done)"
+            )
+        self._last_stamp = stamp_ns
+        first = k if self._next_k is None else max(self._next_k, k)
+        return Due(range(first, k + self.lookahead + 1))
+
+    def sent(self, sp: Setpoint) -> None:
+        """Set point ``sp`` went out."""
+        self._sent[sp.k] = sp
+        self._next_k = sp.k + 1
+
+    def answered(self, k: int) -> None:
+        """Joint state ``k`` is answered: forget what answers only earlier samples."""
+        self._sent = {j: v for j, v in self._sent.items() if j >= k}

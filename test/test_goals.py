@@ -1,0 +1,219 @@
+"""The feedforward's plan and lookahead (apc_feedforward.goals), no ROS graph: the first move
+from the measured position, queued goals from the end of the current motion, the queue bound,
+the checks of a goal (limits, speed), the hold after a plan that cannot be published, and
+which samples answer which joint state (ahead, resend, stale)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from apc_core import wire
+from apc_core.robot import load_robot
+from apc_feedforward.goals import MAX_QUEUED_GOALS, GoalQueue, Lookahead
+from apc_feedforward.nominal import Feedforward, Setpoint
+from apc_feedforward.trajectory import FourThreeFour, TrajectoryError, Waypoints
+
+URDF = Path(__file__).resolve().parents[1] / "config" / "puma560_3dof.urdf"
+T = 0.01
+MOVE = dict(segment_times=(0.2, 0.6, 0.2), lift_off=0.1, set_down=0.9)
+Q0 = np.deg2rad([10.0, 20.0, -30.0])
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(URDF)
+
+
+def queue(robot, first_goal=None) -> GoalQueue:
+    return GoalQueue(
+        robot.model, T, robot.joint_names, robot.position_limits, first_goal=first_goal, move=MOVE
+    )
+
+
+def goal(times_s, positions, velocities=None) -> wire.Waypoints:
+    positions = np.atleast_2d(np.asarray(positions, dtype=float))
+    vel = None if velocities is None else np.atleast_2d(np.asarray(velocities, dtype=float))
+    return wire.Waypoints(np.asarray(times_s, dtype=float), positions, vel, None)
+
+
+def keep(sp: Setpoint) -> Setpoint:
+    return sp
+
+
+def test_the_first_sample_holds_the_measured_position_without_a_first_goal(robot):
+    q = queue(robot)
+    out = q.sample(5, Q0, keep)
+    assert out.rendered is out.setpoint and out.setpoint.k == 5
+    assert_array_equal(out.setpoint.q, Q0)
+    assert_array_equal(out.setpoint.qd, np.zeros(3))
+    # Later samples hold it; another measured position does not move the plan.
+    assert_array_equal(q.sample(50, Q0 + 1.0, keep).setpoint.q, Q0)
+
+
+def test_the_first_move_starts_at_the_first_measured_position_and_sample(robot):
+    target = Q0 + 0.2
+    q = queue(robot, first_goal=target)
+    reference = Feedforward(robot.model, FourThreeFour(Q0, target, **MOVE), T, 3)
+    for k in (3, 10, 60, 103, 200):
+        got = q.sample(k, Q0, keep).setpoint
+        want = reference.sample(k)
+        assert_array_equal(got.q, want.q)
+        assert_array_equal(got.u_n, want.u_n)
+    assert_array_equal(q.sample(500, Q0, keep).setpoint.q, target)  # held after the move
+
+
+def test_a_queued_goal_starts_where_and_when_the_current_motion_ends(robot):
+    target, next_q = Q0 + 0.2, Q0 + 0.3
+    q = queue(robot, first_goal=target)
+    q.sample(0, Q0, keep)
+    q.add(goal([0.5], [next_q]))
+    end = q.feedforward.end_k()
+    assert end == 100
+    for k in range(1, end):
+        out = q.sample(k, Q0, keep)
+        assert not out.started
+    out = q.sample(end, Q0, keep)
+    assert out.started == [0.5] and not q.queued
+    plan = Waypoints(target, np.array([0.5]), np.atleast_2d(next_q))
+    for k in (end, end + 20, end + 50):
+        assert_array_equal(q.sample(k, Q0, keep).setpoint.q, plan.sample((k - end) * T)[0])
+
+
+def test_goals_queued_before_the_first_sample_start_in_order(robot):
+    q = queue(robot)
+    q.add(goal([0.1], [Q0 + 0.01]))
+    q.add(goal([0.1], [Q0 + 0.02]))
+    assert len(q.queued) == 2
+    # The hold of the first sample lasts one period; the goals follow one after the other.
+    started = [k for k in range(40) if q.sample(k, Q0, keep).started]
+    assert started == [1, 11]
+    assert_array_equal(q.sample(40, Q0, keep).setpoint.q, Q0 + 0.02)
+
+
+def test_the_queue_is_bounded(robot):
+    q = queue(robot)
+    for _ in range(MAX_QUEUED_GOALS):
+        q.add(goal([0.1], [Q0]))
+    with pytest.raises(wire.WireError, match="goals already queued"):
+        q.add(goal([0.1], [Q0]))
+    assert len(q.queued) == MAX_QUEUED_GOALS
+
+
+def test_a_goal_outside_the_joint_limits_is_refused_naming_the_joint(robot):
+    upper = robot.position_limits[1]
+    q = queue(robot)
+    outside = Q0.copy()
+    outside[1] = upper[1] + 0.1
+    with pytest.raises(wire.WireError, match=rf"points\[1\].positions: .*{robot.joint_names[1]}"):
+        q.add(goal([0.1, 0.2], [Q0, outside]))
+    assert not q.queued
+
+
+def test_a_goal_too_fast_for_the_wire_is_refused_when_it_arrives(robot):
+    q = queue(robot)
+    with pytest.raises(TrajectoryError, match="too fast"):
+        q.add(goal([0.05, 0.1], [Q0 + 0.1, Q0 + 0.2], velocities=[[2e6] * 3, [0.0] * 3]))
+    assert not q.queued
+
+
+def test_a_goal_too_fast_from_its_actual_start_is_refused_when_it_starts(robot):
+    far = Q0 + 1e5  # the first move ends 1e5 rad away (nothing checks a first goal's range)
+    q = queue(robot, first_goal=far)
+    q.sample(0, Q0, keep)
+    # Checked from its own first point it does not move; from `far` it is 1e5 rad in 20 ms.
+    q.add(goal([0.02], [Q0]))
+    out = q.sample(100, Q0, keep)
+    assert len(out.refused) == 1 and isinstance(out.refused[0], TrajectoryError)
+    assert not out.started and not q.queued
+    assert_array_equal(out.setpoint.q, far)
+
+
+def test_a_set_point_the_wire_refuses_drops_the_plan_for_a_hold_of_the_last_one(robot):
+    q = queue(robot, first_goal=Q0 + 0.2)
+    last = q.sample(0, Q0, keep).setpoint
+    for k in range(1, 40):
+        last = q.sample(k, Q0, keep).setpoint
+
+    def refuse_moving(sp: Setpoint) -> Setpoint:
+        if np.any(sp.qd != 0.0):
+            raise wire.WireError("points[0].velocities: too big")
+        return sp
+
+    out = q.sample(40, Q0, refuse_moving)
+    assert isinstance(out.plan_error, wire.WireError) and out.failed is None
+    assert_array_equal(out.setpoint.q, last.q)
+    assert_array_equal(out.setpoint.qd, np.zeros(3))
+    assert_array_equal(q.sample(41, Q0, keep).setpoint.q, last.q)
+
+
+def test_nothing_is_rendered_when_even_the_hold_is_refused(robot):
+    def refuse(sp: Setpoint) -> Setpoint:
+        raise wire.WireError("refused")
+
+    q = queue(robot)
+    out = q.sample(0, Q0, refuse)
+    assert out.plan_error is not None and out.failed is not None
+    assert out.rendered is None and out.setpoint is None
+    # The next sample renders again (the hold starts at the measured position).
+    assert_array_equal(q.sample(1, Q0, keep).setpoint.q, Q0)
+
+
+def _setpoint(k: int) -> Setpoint:
+    z = np.zeros(3)
+    return Setpoint(k=k, t=0.0, q=z, qd=z, qdd=z, u_n=z)
+
+
+def _answer(look: Lookahead, k: int, period_ns: int = 10) -> list[int]:
+    due = look.due(k * period_ns, k)
+    assert due.resend is None
+    for j in due.samples:
+        look.sent(_setpoint(j))
+    look.answered(k)
+    return list(due.samples)
+
+
+def test_lookahead_answers_each_state_with_the_samples_not_sent_yet():
+    look = Lookahead(2)
+    assert _answer(look, 0) == [0, 1, 2]
+    assert _answer(look, 1) == [3]
+    assert _answer(look, 4) == [4, 5, 6]  # a gap: from the state's own sample on
+
+
+def test_lookahead_zero_answers_a_state_with_its_own_sample():
+    look = Lookahead(0)
+    assert [_answer(look, k) for k in range(3)] == [[0], [1], [2]]
+
+
+def test_lookahead_starts_at_the_first_state_it_sees():
+    assert _answer(Lookahead(1), 7) == [7, 8]
+
+
+def test_a_resent_state_gets_everything_sent_for_it_again():
+    look = Lookahead(1)
+    _answer(look, 0)
+    _answer(look, 1)
+    due = look.due(10, 1)
+    assert due.resend is not None and [sp.k for sp in due.resend] == [1, 2]
+    assert list(due.samples) == []
+    assert _answer(look, 2) == [3]
+
+
+def test_a_sample_not_sent_is_computed_again_at_the_next_state():
+    look = Lookahead(1)
+    look.due(0, 0)
+    look.sent(_setpoint(0))  # sample 1 failed and was not sent
+    look.answered(0)
+    assert list(look.due(10, 1).samples) == [1, 2]
+
+
+def test_a_stale_state_is_refused_and_changes_nothing():
+    look = Lookahead(1)
+    _answer(look, 0)
+    _answer(look, 3)
+    with pytest.raises(wire.WireError, match="stale"):
+        look.due(20, 2)
+    assert _answer(look, 4) == [5]
