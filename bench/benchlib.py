@@ -337,8 +337,8 @@ BUCKETS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("feedforward (trajectory, RNEA)", ("apc_feedforward/trajectory.py", "nominal.py")),
     ("recorder (MCAP)", ("recorder.py", "apc_core/bag.py", "/mcap/", "zstandard")),
     (
-        "messages (wire.py, msg classes)",
-        ("apc_core/wire.py", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
+        "messages (wire, msg classes)",
+        ("apc_core/wire/", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
     ),
     ("apc nodes (callbacks, diagnostics)", ("/node.py", "nodeutil.py", "node_proc.py")),
     (

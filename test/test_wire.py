@@ -184,7 +184,9 @@ def test_joint_state_round_trip_every_field():
     assert list(msg.position) == q.tolist()
     assert list(msg.velocity) == qd.tolist()
     assert list(msg.effort) == tau.tolist()
-    sample = wire.joint_state_to_arrays(_wire_round_trip(msg), NAMES, require=wire._JS_FIELDS)
+    sample = wire.joint_state_to_arrays(
+        _wire_round_trip(msg), NAMES, require=wire.JOINT_STATE_FIELDS
+    )
     assert sample.stamp_ns == 12_340_000_000
     np.testing.assert_array_equal(sample.position, q)
     np.testing.assert_array_equal(sample.velocity, qd)
@@ -192,7 +194,7 @@ def test_joint_state_round_trip_every_field():
 
 
 def test_joint_state_reorders_by_name():
-    straight = wire.joint_state_to_arrays(_good_js(), NAMES, require=wire._JS_FIELDS)
+    straight = wire.joint_state_to_arrays(_good_js(), NAMES, require=wire.JOINT_STATE_FIELDS)
     good = _good_js()
     permuted = _js(
         [NAMES[i] for i in PERM],
@@ -200,9 +202,9 @@ def test_joint_state_reorders_by_name():
         [good.velocity[i] for i in PERM],
         [good.effort[i] for i in PERM],
     )
-    sample = wire.joint_state_to_arrays(permuted, NAMES, require=wire._JS_FIELDS)
+    sample = wire.joint_state_to_arrays(permuted, NAMES, require=wire.JOINT_STATE_FIELDS)
     assert sample.stamp_ns == straight.stamp_ns
-    for field in wire._JS_FIELDS:
+    for field in wire.JOINT_STATE_FIELDS:
         np.testing.assert_array_equal(getattr(sample, field), getattr(straight, field))
     np.testing.assert_array_equal(sample.position, [0.1, 0.2, 0.3])
     np.testing.assert_array_equal(sample.velocity, [1.0, 2.0, 3.0])

@@ -1,0 +1,140 @@
+"""The wire contract of apc: topic names, QoS, message <-> numpy conversion and validation.
+
+Every node takes its topic names and QoS from here (no topic string literal in a ``node.py``),
+and every message that crosses the wire goes through one of the converters below, so that a
+malformed message is rejected at the border with a :class:`WireError` that names the field.
+Callers use this package's names (``from apc_core import wire``; ``wire.JOINT_STATES``); its
+modules each hold one job:
+
+- :mod:`~apc_core.wire.topics`: topic names, QoS profiles, :data:`TOPICS` (the table the
+  recorder records);
+- :mod:`~apc_core.wire.stamps`: integer nanoseconds, ROS stamps and durations, the sample grid;
+- :mod:`~apc_core.wire.fields`: :class:`WireError` and the checks every converter applies;
+- :mod:`~apc_core.wire.joint_state`: ``JointState`` as joint states and torque commands;
+- :mod:`~apc_core.wire.joint_trajectory`: ``JointTrajectory`` as set points and goals;
+- :mod:`~apc_core.wire.estimate`: ``Float64MultiArray`` as the identification estimate.
+
+Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and diagnostics global)
+---------------------------------------------------------------------------------------------------
+- ``JOINT_STATES``: ``sensor_msgs/JointState``, :data:`CONTROL_QOS`
+- ``SETPOINT``: ``trajectory_msgs/JointTrajectory`` with one point, :data:`CONTROL_QOS`
+- ``FEEDFORWARD_TORQUE``, ``FEEDBACK_TORQUE``: ``sensor_msgs/JointState`` (name + effort),
+  :data:`CONTROL_QOS`
+- ``ESTIMATE``: ``std_msgs/Float64MultiArray`` (:func:`estimate_to_msg`), :data:`CONTROL_QOS`
+- ``TRAJECTORY_GOAL``: ``trajectory_msgs/JointTrajectory``, :data:`TRAJECTORY_GOAL_QOS`
+- ``CLOCK`` (absolute): ``rosgraph_msgs/Clock``, :data:`CLOCK_QOS`
+- ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
+
+Conventions
+-----------
+- Time is integer nanoseconds everywhere. Sample ``k`` is stamped ``k * T`` computed in integers
+  (:func:`sample_stamp_ns`), so stamps are exact for any run length (no float drift).
+- Joint order comes from ``name`` (``joint_names``), never from the position in the array: every
+  reader reorders to the order the caller asks for.
+- Units: positions rad (or m), velocities rad/s, accelerations rad/s², torques N·m (or N).
+- Nothing non-finite is published or accepted: the writers raise :class:`WireError` rather than
+  publish garbage, the readers raise it rather than hand garbage to a controller.
+"""
+
+from apc_core.wire.estimate import (
+    ESTIMATE_COLS_LABEL,
+    ESTIMATE_ROWS_LABEL,
+    ESTIMATE_TRAILER,
+    Estimate,
+    estimate_to_msg,
+    msg_to_estimate,
+    theta_to_estimate_msg,
+)
+from apc_core.wire.fields import DEFAULT_MAX_ABS, WireError
+from apc_core.wire.joint_state import (
+    JOINT_STATE_FIELDS,
+    JointSample,
+    Torque,
+    arrays_to_joint_state,
+    joint_state_to_arrays,
+    msg_to_torque,
+    torque_to_msg,
+)
+from apc_core.wire.joint_trajectory import (
+    Setpoint,
+    Waypoints,
+    msg_to_setpoint,
+    msg_to_waypoints,
+    setpoint_to_msg,
+)
+from apc_core.wire.stamps import (
+    NS_PER_S,
+    duration_to_ns,
+    ns_to_duration,
+    ns_to_stamp,
+    sample_index,
+    sample_stamp_ns,
+    seconds_to_ns,
+    stamp_to_ns,
+)
+from apc_core.wire.topics import (
+    CLOCK,
+    CLOCK_QOS,
+    CONTROL_QOS,
+    DIAGNOSTICS,
+    DIAGNOSTICS_QOS,
+    ESTIMATE,
+    FEEDBACK_TORQUE,
+    FEEDFORWARD_TORQUE,
+    JOINT_STATES,
+    MAX_LOOKAHEAD,
+    SETPOINT,
+    TOPICS,
+    TRAJECTORY_GOAL,
+    TRAJECTORY_GOAL_QOS,
+    TopicSpec,
+    topic_spec,
+)
+
+__all__ = [
+    "CLOCK",
+    "CLOCK_QOS",
+    "CONTROL_QOS",
+    "DEFAULT_MAX_ABS",
+    "DIAGNOSTICS",
+    "DIAGNOSTICS_QOS",
+    "ESTIMATE",
+    "ESTIMATE_COLS_LABEL",
+    "ESTIMATE_ROWS_LABEL",
+    "ESTIMATE_TRAILER",
+    "FEEDBACK_TORQUE",
+    "FEEDFORWARD_TORQUE",
+    "JOINT_STATES",
+    "JOINT_STATE_FIELDS",
+    "MAX_LOOKAHEAD",
+    "NS_PER_S",
+    "SETPOINT",
+    "TOPICS",
+    "TRAJECTORY_GOAL",
+    "TRAJECTORY_GOAL_QOS",
+    "Estimate",
+    "JointSample",
+    "Setpoint",
+    "TopicSpec",
+    "Torque",
+    "Waypoints",
+    "WireError",
+    "arrays_to_joint_state",
+    "duration_to_ns",
+    "estimate_to_msg",
+    "joint_state_to_arrays",
+    "msg_to_estimate",
+    "msg_to_setpoint",
+    "msg_to_torque",
+    "msg_to_waypoints",
+    "ns_to_duration",
+    "ns_to_stamp",
+    "sample_index",
+    "sample_stamp_ns",
+    "seconds_to_ns",
+    "setpoint_to_msg",
+    "stamp_to_ns",
+    "theta_to_estimate_msg",
+    "topic_spec",
+    "torque_to_msg",
+]

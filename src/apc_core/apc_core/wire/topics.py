@@ -1,0 +1,129 @@
+"""apc's topics: names, message types and QoS, as the table every node and the recorder use.
+
+Names are relative, so a namespace such as ``/puma`` moves a whole arm; the clock and the
+diagnostics are global.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+#: plant -> all: ``q``, ``q̇`` at sample k; ``effort`` = torque applied over the period ending at k.
+JOINT_STATES = "joint_states"
+#: feedforward -> feedback, recorder: the planned set point of sample k (one-point trajectory).
+SETPOINT = "feedforward/setpoint"
+#: feedforward -> plant: the nominal torque ``u_n(k)`` (JointState, name + effort only).
+FEEDFORWARD_TORQUE = "feedforward/torque"
+#: feedback -> plant: the perturbation torque ``δu(k)`` (JointState, name + effort only).
+FEEDBACK_TORQUE = "feedback/torque"
+#: feedback -> recorder: identification telemetry (see :func:`estimate_to_msg`).
+ESTIMATE = "feedback/estimate"
+#: user -> feedforward: a new goal (waypoints) to plan and run.
+TRAJECTORY_GOAL = "feedforward/trajectory"
+#: plant -> all: simulation time in lockstep mode (absolute: there is one clock per ROS graph).
+CLOCK = "/clock"
+#: every node -> monitors: loop timing, late/missing inputs, rejected messages, RLS health.
+DIAGNOSTICS = "/diagnostics"
+
+#: Most samples a feedforward may publish ahead of the joint state it answers; the plant refuses
+#: a nominal torque stamped further ahead than this (no plan runs that far ahead of the arm).
+MAX_LOOKAHEAD = 8
+
+#: Control-loop topics (joint states, set point, both torques, estimate): RELIABLE, KEEP_LAST 10,
+#: VOLATILE. Lockstep must not lose a sample (the plant waits for both torques of sample k, a
+#: dropped one would stall it), so best effort is out. Depth 10 absorbs a short stall of a
+#: subscriber without dropping (lockstep has at most one sample in flight; real time ~100 ms).
+#: VOLATILE: an old control sample is meaningless to a late joiner.
+CONTROL_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+#: ``/clock``: KEEP_LAST 1, BEST_EFFORT, VOLATILE -- what rclpy's ``TimeSource`` subscribes with
+#: (and ``rclcpp::ClockQoS``). Only the newest time matters; lockstep does not depend on the clock
+#: arriving (samples are matched by their stamps), a dropped clock message only delays ``now()``.
+#: A RELIABLE publisher would also match this subscriber; BEST_EFFORT keeps the plant from ever
+#: blocking on a slow clock subscriber.
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+#: Trajectory goals: RELIABLE, KEEP_LAST 10, VOLATILE. A goal must not be lost, but it must NOT be
+#: TRANSIENT_LOCAL: a node that (re)starts late would receive the last goal again and replay an
+#: old motion. A goal is an event, not a state.
+TRAJECTORY_GOAL_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+#: ``/diagnostics``: the ROS default profile (RELIABLE, KEEP_LAST 10, VOLATILE), what
+#: ``diagnostic_updater`` and ``diagnostic_aggregator`` use, so standard tools match.
+DIAGNOSTICS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One row of the wire table: what is published on ``name``, and with which QoS.
+
+    Attributes
+    ----------
+    name : str
+        Topic name (relative unless it starts with ``/``).
+    msg_type : type
+        The rclpy message class.
+    qos : rclpy.qos.QoSProfile
+        The profile publishers offer and subscribers request.
+    """
+
+    name: str
+    msg_type: type
+    qos: QoSProfile
+
+    @property
+    def type_name(self) -> str:
+        """The ROS type name, e.g. ``"sensor_msgs/msg/JointState"``."""
+        pkg = self.msg_type.__module__.split(".")[0]
+        return f"{pkg}/msg/{self.msg_type.__name__}"
+
+
+#: The whole wire, in the order of the design table; the recorder records all of it.
+TOPICS: tuple[TopicSpec, ...] = (
+    TopicSpec(JOINT_STATES, JointState, CONTROL_QOS),
+    TopicSpec(SETPOINT, JointTrajectory, CONTROL_QOS),
+    TopicSpec(FEEDFORWARD_TORQUE, JointState, CONTROL_QOS),
+    TopicSpec(FEEDBACK_TORQUE, JointState, CONTROL_QOS),
+    TopicSpec(ESTIMATE, Float64MultiArray, CONTROL_QOS),
+    TopicSpec(TRAJECTORY_GOAL, JointTrajectory, TRAJECTORY_GOAL_QOS),
+    TopicSpec(CLOCK, Clock, CLOCK_QOS),
+    TopicSpec(DIAGNOSTICS, DiagnosticArray, DIAGNOSTICS_QOS),
+)
+
+
+def topic_spec(name: str) -> TopicSpec:
+    """Return the :data:`TOPICS` row of topic ``name``.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not one of apc's topics.
+    """
+    for spec in TOPICS:
+        if spec.name == name:
+            return spec
+    raise KeyError(f"{name!r} is not an apc topic; known: {[s.name for s in TOPICS]}")
