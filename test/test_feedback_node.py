@@ -1,0 +1,182 @@
+"""The feedback node's wiring, without a ROS graph: its callbacks are called directly with
+messages and what it would publish is recorded, so every verdict of the sample pairer is checked
+to reach its counter or its publisher, and every run-time setting rule its answer.
+
+The rules themselves are unit-tested on the plain classes (``test_sampling.py``,
+``test_controller.py``); ``test_faults_input.py`` keeps end-to-end checks over DDS.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+
+from apc_core import wire
+from apc_feedback.node import FeedbackNode
+from apc_plant_sim.experiment import RunSpec
+from apc_plant_sim.scenario import paper_scenario
+
+pytestmark = pytest.mark.ros
+
+T = 10_000_000
+
+
+class Recorder:
+    """Stands in for a publisher: keeps what is published, reports one listener."""
+
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def publish(self, msg) -> None:
+        self.sent.append(msg)
+
+    def get_subscription_count(self) -> int:
+        return 1
+
+
+@pytest.fixture(scope="module")
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def node_of(context):
+    made = []
+
+    def make(controller: str, **overrides) -> FeedbackNode:
+        params = {**RunSpec(paper_scenario("a"), controller).node_parameters()["feedback_node"]}
+        params.update(overrides)
+        node = FeedbackNode(
+            context=context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
+        )
+        made.append(node)
+        node.torque_pub, node.estimate_pub = Recorder(), Recorder()
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+def count(node: FeedbackNode, key: str) -> int:
+    return node.diagnostics.counters.get(key, 0)
+
+
+def joint_state(node, stamp: int, q, qd=None) -> None:
+    qd = np.zeros(len(q)) if qd is None else qd
+    msg = wire.arrays_to_joint_state(stamp, node.joint_names, q, velocity=qd)
+    node._on_joint_state(msg)
+
+
+def setpoint(node, stamp: int, q_d) -> None:
+    zero = np.zeros(len(q_d))
+    node._on_setpoint(wire.setpoint_to_msg(stamp, node.joint_names, q_d, zero, zero, zero, 0))
+
+
+def torques(node) -> list[np.ndarray]:
+    return [wire.msg_to_torque(m, node.joint_names).effort for m in node.torque_pub.sent]
+
+
+def test_every_verdict_reaches_its_counter_or_publisher(node_of):
+    fb = node_of("pd")
+    q_d, e = np.array([0.1, -0.2, 0.3]), np.array([0.01, -0.02, 0.03])
+    joint_state(fb, 0, q_d - e)
+    joint_state(fb, 0, q_d + e)  # the first one stands
+    assert count(fb, "duplicate.joint_states") == 1 and not fb.torque_pub.sent
+    setpoint(fb, 0, q_d)
+    np.testing.assert_array_equal(
+        torques(fb), [100.0 * (q_d - (q_d - e))]
+    )  # Kp (q_d - q), first state
+    joint_state(fb, T, q_d)
+    setpoint(fb, T, q_d)
+    assert len(fb.torque_pub.sent) == 2 and count(fb, "samples") == 2
+    setpoint(fb, 0, q_d)  # copies of set points used: the feedforward answering a resend
+    setpoint(fb, T, q_d)
+    assert count(fb, "resent.feedforward/setpoint") == 2
+    setpoint(fb, T, q_d + e)
+    assert count(fb, "duplicate.feedforward/setpoint") == 1
+    setpoint(fb, 0, q_d + e)
+    setpoint(fb, T // 2, q_d)
+    assert count(fb, "rejected.feedforward/setpoint") == 2
+    joint_state(fb, T, q_d + e)  # a resend: answered with the torque already published
+    assert count(fb, "resent") == 1
+    assert len(fb.torque_pub.sent) == 3 and fb.torque_pub.sent[2] is fb.torque_pub.sent[1]
+    for stamp in (0, -T, T + 1):
+        joint_state(fb, stamp, q_d)
+    assert count(fb, "rejected.joint_states") == 3
+    assert count(fb, "rejected") == 5 and count(fb, "callback_errors") == 0
+    assert len(fb.torque_pub.sent) == 3
+
+
+def test_a_failed_law_step_publishes_nothing_and_is_not_run_again(node_of):
+    fb = node_of("pd", **{"gains.kp": 1e9})  # du beyond the wire's bound
+    q_d = np.array([0.1, -0.2, 0.3])
+    joint_state(fb, 0, q_d - 0.5)
+    setpoint(fb, 0, q_d)
+    assert count(fb, "rejected.feedback_law") == 1 and not fb.torque_pub.sent
+    joint_state(fb, 0, q_d - 0.5)  # its resend: nothing to answer with, the law is not run
+    assert count(fb, "resent") == 1 and count(fb, "rejected.feedback_law") == 1
+    assert not fb.torque_pub.sent
+
+
+def test_adaptive_law_publishes_its_estimate_and_answers_a_resend_with_both(node_of):
+    fb = node_of("adaptive")
+    q_d = np.array([0.1, -0.2, 0.3])
+    for k in (0, 1):
+        joint_state(fb, k * T, q_d + 1e-3)
+        setpoint(fb, k * T, q_d)
+    assert len(fb.torque_pub.sent) == len(fb.estimate_pub.sent) == 2
+    joint_state(fb, T, q_d)
+    assert len(fb.torque_pub.sent) == len(fb.estimate_pub.sent) == 3
+    assert "trace_p" in fb.diagnostics.values
+
+
+def set_params(fb, *params: Parameter):
+    return fb._on_set_parameters(list(params))
+
+
+@pytest.mark.parametrize(
+    ("controller", "name", "value", "why"),
+    [
+        ("pd", "gains.kp", "fast", "must be a number"),
+        ("pd", "gains.kv", True, "must be a number"),
+        ("pd", "gains.kv", [1.0, 2.0], "must be a number"),
+        ("pd", "gains.kp", -1.0, "out of range"),
+        ("pd", "gains.kp", math.nan, "out of range"),
+        ("pd", "adaptive.r", 1.0, "not used by controller 'pd'"),
+        ("none", "gains.kp", 1.0, "not used by controller 'none'"),
+        ("adaptive", "adaptive.r", 0.0, "out of range"),
+        ("adaptive", "adaptive.q_velocity", "x", "must be a number"),
+        ("adaptive", "gains.kp", 50.0, "not used by controller 'adaptive'"),
+    ],
+)
+def test_run_time_settings_are_refused_with_the_parameter_named(
+    node_of, controller, name, value, why
+):
+    result = set_params(node_of(controller), Parameter(name, value=value))
+    assert not result.successful
+    assert result.reason.startswith(f"parameter '{name}': ") and why in result.reason
+
+
+def test_run_time_settings_apply_at_the_next_sample_all_or_none(node_of):
+    fb = node_of("pd")
+    q_d, e = np.array([0.2, -0.3, 0.4]), np.array([0.01, -0.02, 0.005])
+    assert set_params(fb, Parameter("gains.kp", value=200)).successful  # an integer is fine
+    assert fb.law.gains.kp == 100.0  # not before the next sample
+    refused = set_params(fb, Parameter("gains.kv", value=5.0), Parameter("gains.kp", value=-1.0))
+    assert not refused.successful and "gains.kp" in refused.reason
+    assert set_params(fb, Parameter("use_sim_time", value=False)).successful  # not ours
+    joint_state(fb, 0, q_d - e)
+    setpoint(fb, 0, q_d)
+    np.testing.assert_array_equal(torques(fb), [200.0 * (q_d - (q_d - e))])
+    assert (fb.law.gains.kp, fb.law.gains.kv) == (200.0, 20.0)  # kv of the refused set: no
+    assert isinstance(fb.law.gains.kp, float)
+    assert count(fb, "parameter_updates") == 1
