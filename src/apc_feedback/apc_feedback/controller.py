@@ -158,6 +158,32 @@ class AdaptiveConfig:
         possible models. Without it a sudden load (a payload picked up) lets one
         large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
         torque (19 deg on joint 3 in the pickup run). Off in the paper.
+    command_delay : {0, 1}
+        Periods between the law's command and the period the arm applies it over (a drive
+        that applies the newest command at its next cycle: 1). Eq. 16 stays the identified
+        model, with ``δu(k)`` the perturbation *applied* over ``[kT, (k+1)T)``; the control
+        then plans over the state ``(δx(k), δu(k))``, where ``δu(k)`` is already decided
+        (its own last command minus ``u_n(k)``), and commands the next period's
+        ``δu(k+1)`` (converted to this sample's ``du`` with ``u_n`` extrapolated one period).
+        0 (default): the paper's law.
+    input_periods : {1, 2}
+        Periods whose input reaches the next state: 1 is Eq. 16; 2 models
+        ``δx(k+1) = F δx(k) + G (δu(k) + δu(k-1)) + w``, the structure a velocity measured as
+        the backward difference of positions over one period has (``(q(k+1) - q(k)) / T`` of
+        a double integrator carries half of each of the last two periods' inputs); the
+        regressor's input is then ``δu(k) + δu(k-1)`` and the control plans over
+        ``(δx(k), δu(k-1))``. 1 (default): the paper's law.
+    r_memory : float
+        With ``command_delay`` or ``input_periods``, the cost weight of the inputs already
+        under way (the memory states): the input sum ``δu(k) + δu(k-1)`` has a zero at
+        ``z = -1``, so an input alternating from period to period moves no modelled state, and
+        with ``R`` tiny the planned control can let it grow; weighing it bounds it. 0
+        (default): unweighted.
+    identify_min_speed : float
+        No identification step while a joint's measured speed is below this at ``k-1`` or
+        ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
+        a torque moves nothing and the identifier would learn ``Ĝ_ii -> 0``, and the optimal
+        control ``~ Ĝ⁻¹`` command the torque limit. 0 (default): always identify (the paper).
     """
 
     period: float = 0.010
@@ -216,6 +242,18 @@ class AdaptiveConfig:
     project_g: bool = setting(
         False,
         "refuse RLS steps that make G's velocity block (~T D^-1) indefinite; put the jump in w",
+    )
+    command_delay: int = setting(
+        0, "periods from a command to the period the arm applies it over (0 or 1)", 0, 1
+    )
+    input_periods: int = setting(
+        1, "periods whose input reaches the next state: 2 for a differenced velocity", 1, 2
+    )
+    r_memory: float = setting(
+        0.0, "cost weight of the inputs under way (command_delay, input_periods)", 0.0, 1e12
+    )
+    identify_min_speed: float = setting(
+        0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3
     )
 
     def __post_init__(self) -> None:
@@ -304,6 +342,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
         self._Q_aug = np.diag(np.concatenate([q_diagonal, np.full(n, config.q_integral)]))
         self._identify_applied = config.identify_with == "applied"
+        self._memory = config.command_delay > 0 or config.input_periods > 1
 
     @property
     def settings(self) -> AdaptiveConfig:
@@ -329,6 +368,14 @@ class AdaptiveFeedback(FeedbackLaw):
         self.rejected_updates = 0
         self.projected_updates = 0
         self.skipped_updates = 0
+        self.stuck_updates = 0
+        self._speed_prev = np.zeros(n)
+        # Applied perturbations a(k-1), a(k-2) and the last command (input memory only).
+        self._a_last = np.zeros(n)
+        self._a_before = np.zeros(n)
+        self._command_prev = np.zeros(n)
+        self._command_before = np.zeros(n)
+        self._u_n_known = False
         self._k_prev = 0
         # z(k-1) = (dx(k-1), du(k-1), 1) of Eq. 23, filled in place: dx(k) goes into its first
         # 2n entries once du(k) is known, du(k-1) is written when sample k arrives.
@@ -360,18 +407,28 @@ class AdaptiveFeedback(FeedbackLaw):
             raise FeedbackError(f"state error is not finite at sample {k}")
         residual = None
         rejected = skipped = False
+        stuck = self._stuck(qd)
         trace_p = float("nan")
         if not self._started:
             F0, G0 = initial_model(
                 self.model, q_d, qd_d, u_n, self.config.period, self.config.initial_model
             )
-            self.rls.reset(F0, G0)
+            # Two input periods share a held input's effect: G(0) = Eq. 33's G / 2.
+            self.rls.reset(F0, G0 / self.config.input_periods)
             self._started = True
         elif k != self._k_prev + 1:
             skipped = True
             self.skipped_updates += 1
+        elif stuck:
+            self.stuck_updates += 1
+            self._remember_applied(applied)
         else:
-            if applied is not None and self._identify_applied:
+            if self._memory:
+                self._remember_applied(applied)
+                np.add(self._a_last, self._a_before, out=self._z_du)
+                if self.config.input_periods == 1:
+                    self._z_du[:] = self._a_last
+            elif applied is not None and self._identify_applied:
                 np.subtract(applied, self._u_n_prev, out=self._z_du)
             else:
                 self._z_du[:] = self._du_prev
@@ -389,7 +446,15 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.rejected_updates += 1
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
-        du = self._control(dx)
+        if self._memory:
+            if not self._u_n_known:  # the arm held the nominal torque before the first sample
+                self._command_prev = u_n.copy()
+            du = self._control_with_memory(dx, u_n)
+            self._command_before = self._command_prev
+            self._command_prev = u_n + du
+            self._u_n_known = True
+        else:
+            du = self._control(dx)
         self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
@@ -433,3 +498,73 @@ class AdaptiveFeedback(FeedbackLaw):
         return receding_horizon_control(
             Fa, Ga, wa, self._Q_aug, self.R, xa, config.horizon, check_weights=False
         )
+
+    def _stuck(self, qd: np.ndarray) -> bool:
+        """A joint's measured speed is below ``identify_min_speed`` at ``k-1`` or ``k``."""
+        v_min = self.config.identify_min_speed
+        if v_min <= 0.0:
+            return False
+        speed = np.abs(qd)
+        stuck = bool((np.minimum(speed, self._speed_prev) < v_min).any())
+        self._speed_prev = speed
+        return stuck
+
+    def _remember_applied(self, applied: np.ndarray | None) -> None:
+        """Shift in ``a(k-1)``, the perturbation applied over ``[(k-1)T, kT)``: the reported
+        torque minus ``u_n(k-1)``, or (commanded, or no report) the command that period got."""
+        self._a_before[:] = self._a_last
+        if applied is not None and self._identify_applied:
+            np.subtract(applied, self._u_n_prev, out=self._a_last)
+        elif self.config.command_delay == 0:
+            self._a_last[:] = self._du_prev
+        else:
+            np.subtract(self._command_before, self._u_n_prev, out=self._a_last)
+
+    def _control_with_memory(self, dx: np.ndarray, u_n: np.ndarray) -> np.ndarray:
+        """Optimal control over ``(δx(k), memory)`` for ``command_delay`` / ``input_periods``.
+
+        The memory holds the applied perturbations the next states still depend on, newest
+        first: ``a(k)`` (delay 1: decided last sample), then ``a(k-1)`` (two input periods).
+        The decision is ``v = a(k + d)``; ``x(k+1) = F x + G Σ_j a(k-j) + w`` over the input
+        periods, the memory shifts by one per step; the horizon counts steps after the delay.
+        The integral state of :meth:`_control` is added on the position rows.
+        """
+        config, n, T = self.config, self.n_joints, self.config.period
+        d, periods = config.command_delay, config.input_periods
+        F0, G0, w0 = self.rls.F, self.rls.G, self.rls.w
+        # a(k) = τ_c(k-1) - u_n(k): the command already on its way (delay 1).
+        memory = ([self._command_prev - u_n] if d else []) + ([self._a_last] if periods > 1 else [])
+        L, p = len(memory), 2 * n
+        s = p + L * n
+        F = np.zeros((s, s))
+        G = np.zeros((s, n))
+        F[:p, :p] = F0
+        for j in range(periods):  # a(k-j) is memory entry d-1+j, or the decision
+            i = d - 1 + j
+            if i < 0:
+                G[:p] += G0
+            else:
+                F[:p, p + i * n : p + (i + 1) * n] += G0
+        if L:
+            G[p : p + n] = np.eye(n)
+            for i in range(1, L):
+                F[p + i * n : p + (i + 1) * n, p + (i - 1) * n : p + i * n] = np.eye(n)
+        w = np.concatenate([w0, np.zeros(L * n)])
+        x = np.concatenate([dx, *memory])
+        q_diagonal = np.concatenate([self.Q.diagonal(), np.full(L * n, config.r_memory)])
+        if config.q_integral > 0.0:
+            limit = config.integral_limit
+            self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
+            Fa = np.zeros((s + n, s + n))
+            Fa[:s, :s] = F
+            Fa[s:, :s] = T * F[:n]
+            Fa[s:, s:] = np.eye(n)
+            F, G = Fa, np.vstack([G, T * G[:n]])
+            w = np.concatenate([w, T * w[:n]])
+            x = np.concatenate([x, self.integral])
+            q_diagonal = np.concatenate([q_diagonal, np.full(n, config.q_integral)])
+        v = receding_horizon_control(
+            F, G, w, np.diag(q_diagonal), self.R, x, config.horizon + d, check_weights=False
+        )
+        # v = a(k+d) = τ_c(k) - u_n(k+d), u_n(k+d) extrapolated from u_n(k-1), u_n(k).
+        return v + d * (u_n - self._u_n_prev) if self._u_n_known else v

@@ -1,0 +1,122 @@
+"""What a physical arm does to each law: one effect at a time, then all, offline (no ROS).
+
+The three-joint PUMA 560 on the paper's move, cases (a)-(c) and the 5 lb payload picked up at
+t = 0.5 s ("pickup"), each law on apc's plant wrapped by :mod:`apc_plant_sim.effects` with the
+PUMA 560 data of :func:`apc_plant_sim.effects.puma560_effects` (friction, armature, 1000
+counts per motor revolution, velocity differenced from the quantised positions or with one
+count per period of noise, a one-period command delay). Laws: computed torque (Eq. 36,
+Kp = 100, Kv = 20), the JTC-style PID (tuned at 10 rad/s), the adaptive law with the paper's
+settings, the recommended preset, and the recommended preset with the law option that answers
+the effect (``FIXES``: the command delay in the model, the two-period input of a differenced
+velocity, no identification while a joint sticks; for "all", all of them and a weight on the
+inputs under way).
+
+Per effect, case and law: maximum error over the move and final error at its end, per joint
+(deg), and whether each adaptive column beats both computed torque and PID on every joint in
+both. About 15 s on one core.
+
+    .venv/bin/python bench/effects_sweep.py --out bench/effects_sweep.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from apc_plant_sim.effects import EFFECT_FIELDS, puma560_effects, single_effect
+from apc_plant_sim.scenario import (
+    paper_scenario,
+    paper_settings,
+    recommended_settings,
+    run_offline,
+)
+
+EFFECTS = ("ideal", *EFFECT_FIELDS, "all")
+CASES = ("a", "b", "c", "pickup")
+LAWS = {
+    "computed_torque": ("computed_torque", None),
+    "pid": ("pid", None),
+    "adaptive_paper": ("adaptive", paper_settings()),
+    "adaptive_recommended": ("adaptive", recommended_settings()),
+    "adaptive_recommended_fixed": ("adaptive", recommended_settings()),
+}
+BASELINES = ("computed_torque", "pid")
+# The AdaptiveConfig options added to the recommended preset for each effect (none: nothing to
+# answer). Chosen one effect at a time; "all" combines them (r_memory from a sweep of 0, 3e-5,
+# 1e-4, 3e-4 on delay + velocity_difference).
+FIXES = {
+    "friction": {"identify_min_speed": 0.05},
+    "velocity_difference": {"input_periods": 2},
+    "delay": {"command_delay": 1},
+    "all": {"command_delay": 1, "input_periods": 2, "identify_min_speed": 0.05, "r_memory": 3e-5},
+}
+
+
+def scenario_for(case: str):
+    if case == "pickup":
+        return paper_scenario("c", payload_at_s=0.5)
+    return paper_scenario(case)
+
+
+def measure(effect: str, case: str, law: str) -> dict:
+    kind, params = LAWS[law]
+    if law == "adaptive_recommended_fixed":
+        params = {**params, **FIXES.get(effect, {})}
+    scenario = scenario_for(case)
+    end = scenario.move_end_sample
+    result = run_offline(scenario, kind, params, effects=single_effect(effect, puma560_effects()))
+    err = np.rad2deg(np.abs(result.error))
+    return {
+        "max_deg": err[: end + 1].max(axis=0).round(4).tolist(),
+        "final_deg": err[end].round(4).tolist(),
+    }
+
+
+def beats(row: dict, law: str) -> bool:
+    """``law`` has a smaller max and final error than every baseline on every joint."""
+    mine = row[law]
+    return all(
+        np.all(np.array(mine[key]) < np.array(row[base][key]))
+        for base in BASELINES
+        for key in ("max_deg", "final_deg")
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("bench/effects_sweep.json"))
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    results: dict = {"effects": {}, "settings": {}, "fixes": FIXES}
+    for law, (kind, params) in LAWS.items():
+        results["settings"][law] = {"controller": kind, **(params or {})}
+    for effect in EFFECTS:
+        results["effects"][effect] = {}
+        for case in CASES:
+            row = {law: measure(effect, case, law) for law in LAWS}
+            for law in ("adaptive_recommended", "adaptive_recommended_fixed"):
+                row[f"{law}_beats_baselines"] = beats(row, law)
+            results["effects"][effect][case] = row
+    results["wall_s"] = round(time.perf_counter() - t0, 1)
+    args.out.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"| effect | case | {' | '.join(LAWS)} |")
+    print("|---|---|" + "---|" * len(LAWS))
+    for effect, cases in results["effects"].items():
+        for case, row in cases.items():
+            cells = [
+                "/".join(f"{v:.2f}" for v in row[law]["max_deg"])
+                + " ("
+                + "/".join(f"{v:.2f}" for v in row[law]["final_deg"])
+                + ")"
+                for law in LAWS
+            ]
+            print(f"| {effect} | {case} | {' | '.join(cells)} |")
+    print(f"wrote {args.out} in {results['wall_s']} s")
+
+
+if __name__ == "__main__":
+    main()
