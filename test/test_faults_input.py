@@ -1091,7 +1091,7 @@ def test_realtime_plant_starts_when_the_nominal_torque_ahead_overtakes_sample_0(
     plant, ff_pub, fb_pub, states = _slow_realtime_plant(graph)
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
     _torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead, first
-    graph.spin_until(lambda: SLOW_PERIOD_NS in plant._ff_ahead, what="u_n(1) taken")
+    graph.spin_until(lambda: SLOW_PERIOD_NS in plant.intake.ahead, what="u_n(1) taken")
     _torque(ff_pub, 0, a)
     _torque(fb_pub, 0, np.zeros(N))
     np.testing.assert_array_equal(_applied_before(graph, states, 1), a)

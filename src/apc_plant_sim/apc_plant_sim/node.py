@@ -51,10 +51,10 @@ from apc_core.nodeutil import (
     reject,
     robot_from_params,
     run_node,
-    sample_index,
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_core.robot import Payload, RobotModelError, with_payload
+from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 
 MODES = ("realtime", "lockstep")
@@ -189,20 +189,16 @@ class PlantNode(Node):
         self.diagnostics.set("mode", self.mode)
         self.done = False
         self.exit_code = 0
-        self.started = False
-        self._ff: dict[int, np.ndarray] = {}
-        self._fb: dict[int, np.ndarray] = {}
-        self._ff_latest: tuple[int, np.ndarray, float] | None = None  # stamp, effort, wall time
-        self._fb_latest: tuple[int, np.ndarray, float] | None = None
-        # Real time: nominal torques for samples not reached yet (the feedforward's lookahead),
-        # by stamp; each becomes _ff_latest when its sample comes.
-        self._ff_ahead: dict[int, tuple[int, np.ndarray, float]] = {}
-        self._newest: dict[str, int] = {}  # newest stamp taken per topic
+        self.intake = TorqueIntake(
+            self.period_ns,
+            self.mode == "lockstep",
+            n,
+            wire.seconds_to_ns(values["watchdog_s"]),
+        )
         self._applied: np.ndarray | None = None
         self._sent_wall = 0.0
         self._first_sent_wall = 0.0
         self._created_wall = time.monotonic()
-        self._braking = False
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
@@ -268,85 +264,32 @@ class PlantNode(Node):
         if not resend:
             self._first_sent_wall = self._sent_wall
 
-    def _read_torque(self, msg: JointState, topic: str) -> wire.Torque | None:
-        try:
-            return wire.msg_to_torque(msg, self.joint_names)
-        except wire.WireError as exc:
-            reject(self, self.diagnostics, topic, exc)
-            return None
+    @property
+    def started(self) -> bool:
+        return self.intake.started
 
     def _on_feedforward(self, msg: JointState) -> None:
-        torque = self._read_torque(msg, wire.FEEDFORWARD_TORQUE)
-        if torque is not None:
-            self._take(torque, self._ff, "_ff_latest", wire.FEEDFORWARD_TORQUE)
+        self._take(Source.NOMINAL, msg)
 
     def _on_feedback(self, msg: JointState) -> None:
-        torque = self._read_torque(msg, wire.FEEDBACK_TORQUE)
-        if torque is not None:
-            self._take(torque, self._fb, "_fb_latest", wire.FEEDBACK_TORQUE)
+        self._take(Source.FEEDBACK, msg)
 
-    def _take(self, torque: wire.Torque, pending: dict, latest_attr: str, topic: str) -> None:
-        """File a torque by its stamp.
-
-        Rejected (counted in ``rejected.<topic>``): a stamp that is negative, off the sample
-        grid, ahead of the current sample (a nominal torque: more than
-        :data:`~apc_core.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
-        sent sample 0 -- no controller can have computed it. Ignored and counted: older than the
-        newest torque taken for a sample that has come (``out_of_order.<topic>``); in lockstep,
-        an answer to a sample already integrated (``stale.<topic>``, e.g. to a resend) and a
-        second torque for a sample (``duplicate.<topic>``: the first stands, nothing is applied
-        twice). In real time a nominal torque sent ahead is kept by its sample and does not
-        make an older one out of order: over a link with jitter u_n(k + 1) can overtake u_n(k)
-        (best effort keeps no order), and u_n(0) dropped that way held the run at sample 0.
-        """
-        stamp = torque.stamp_ns
-        current = self.k * self.period_ns
-        ahead = wire.MAX_LOOKAHEAD * self.period_ns if topic == wire.FEEDFORWARD_TORQUE else 0
+    def _take(self, source: Source, msg: JointState) -> None:
+        """File a torque with the intake; count what it did (see ``TorqueIntake.take``)."""
+        topic = source.value
         try:
-            sample_index(stamp, self.period_ns)
-            if stamp > current + ahead or not self.started:
-                raise wire.WireError(
-                    f"header.stamp: {stamp} ns is not a sample the plant sent (at {current} ns)"
-                )
+            torque = wire.msg_to_torque(msg, self.joint_names)
+            filed = self.intake.take(source, torque.stamp_ns, torque.effort, self.k)
         except wire.WireError as exc:
             reject(self, self.diagnostics, topic, exc)
             return
-        newest = self._newest.get(topic)
-        if newest is not None and stamp < newest:
-            self.diagnostics.count(f"out_of_order.{topic}")
+        if filed not in (Filed.TAKEN, Filed.AHEAD):
+            self.diagnostics.count(f"{filed.value}.{topic}")
             return
-        now = time.monotonic()
-        if self.mode == "lockstep":
-            if stamp < current:
-                self.diagnostics.count(f"stale.{topic}")
-                return
-            if stamp in pending:
-                self.diagnostics.count(f"duplicate.{topic}")
-                return
-        elif stamp > current:
-            self._ff_ahead[stamp] = (stamp, torque.effort, now)  # _newest when its sample comes
-            return
-        self._newest[topic] = stamp
-        if stamp == current:
-            self.diagnostics.time(f"latency.{topic}", now - self._first_sent_wall)
-        if self.mode == "lockstep":
-            pending[stamp] = torque.effort
+        if filed is Filed.TAKEN and torque.stamp_ns == self.k * self.period_ns:
+            self.diagnostics.time(f"latency.{topic}", time.monotonic() - self._first_sent_wall)
+        if self.intake.lockstep:
             self._lockstep_try()
-        else:
-            setattr(self, latest_attr, (stamp, torque.effort, now))
-
-    def _promote_ahead(self) -> None:
-        """Real time: the newest nominal torque sent ahead whose sample has come is the latest."""
-        current = self.k * self.period_ns
-        due = [stamp for stamp in self._ff_ahead if stamp <= current]
-        if not due:
-            return
-        newest = max(due)
-        if self._ff_latest is None or newest > self._ff_latest[0]:
-            self._ff_latest = self._ff_ahead[newest]
-            self._newest[wire.FEEDFORWARD_TORQUE] = newest
-        for stamp in due:
-            del self._ff_ahead[stamp]
 
     # -- lockstep -------------------------------------------------------------------------------
     def _ready(self) -> bool:
@@ -361,7 +304,7 @@ class PlantNode(Node):
             return
         if not self.started:
             if self._ready():
-                self.started = True
+                self.intake.started = True
                 self.get_logger().info(f"lockstep: starting at sample {self.k}")
                 self._publish_state()
             elif time.monotonic() - self._created_wall > self._values["lockstep_timeout_s"]:
@@ -373,15 +316,7 @@ class PlantNode(Node):
         now = time.monotonic()
         waited = now - self._first_sent_wall
         if waited > self._values["lockstep_timeout_s"]:
-            stamp = self.k * self.period_ns
-            missing = [
-                topic
-                for topic, pending in (
-                    (wire.FEEDFORWARD_TORQUE, self._ff),
-                    (wire.FEEDBACK_TORQUE, self._fb),
-                )
-                if stamp not in pending
-            ]
+            missing = [source.value for source in self.intake.missing(self.k)]
             self._fail(
                 f"lockstep: no {' and no '.join(missing)} for sample {self.k} after "
                 f"{waited:.1f} s; ending the run (is the peer node running?)"
@@ -419,15 +354,13 @@ class PlantNode(Node):
         self._diagnostics_pub.publish()
 
     def _lockstep_try(self) -> None:
-        stamp = self.k * self.period_ns
-        if self.done or not self.started or stamp not in self._ff or stamp not in self._fb:
+        if self.done or not self.intake.complete(self.k):
             return
         if self.n_samples and self.k >= self.n_samples:
             # The torques of the final sample are in (recorded); nothing more to integrate.
             self._finish()
             return
-        tau = self._ff.pop(stamp) + self._fb.pop(stamp)
-        self._step(tau)
+        self._step(self.intake.pop(self.k))
         self._publish_state()
 
     def _step(self, tau: np.ndarray) -> None:
@@ -458,77 +391,54 @@ class PlantNode(Node):
         if not self.started:
             # Like a robot whose brakes stay on until its controllers are up.
             if self._ready():
-                self.started = True
+                self.intake.started = True
                 self.get_logger().info("real time: controllers connected, starting")
                 self._publish_state()
             return
-        self._promote_ahead()
-        if self.k == 0 and (self._ff_latest is None or self._fb_latest is None):
-            # Sample 0 is out; the clock starts once both controllers have answered it, so that
-            # start-up (first callbacks, discovery of the return path) is not counted as late.
+        tick = self.intake.tick(self.k)
+        if tick.action is Action.WAIT:
             if now - self._first_sent_wall > self._values["resend_s"]:
-                self._publish_state()
+                self._publish_state()  # sample 0 again, until both controllers answer it
             return
-        stamp = self.k * self.period_ns
-        watchdog = self._values["watchdog_s"]
-        ff, fb = self._ff_latest, self._fb_latest
-        # Freshness by the sample a torque answers, not by when it was taken: after a stall of
-        # this process (a loaded machine) the timer fires before the torques waiting in the
-        # queue are taken, and a wall-clock test braked the arm although both controllers had
-        # answered every sample. Counted in periods: a torque answering sample j is fresh up to
-        # sample j + watchdog_s / T, so a dead controller trips the watchdog at the tick
-        # watchdog_s + T to watchdog_s + 2 T after its last torque arrived, as before.
-        limit_ns = wire.seconds_to_ns(watchdog)
-        ff_fresh = ff is not None and stamp - ff[0] <= limit_ns
-        fb_fresh = fb is not None and stamp - fb[0] <= limit_ns
-        late = False
-        for latest, topic in ((ff, wire.FEEDFORWARD_TORQUE), (fb, wire.FEEDBACK_TORQUE)):
-            if latest is None:
-                self.diagnostics.count(f"missing.{topic}")
-                late = True
-            elif latest[0] < stamp:
-                self.diagnostics.count(f"late.{topic}")
-                late = True
-        if late:
-            self.diagnostics.count("late_samples")
-        if not ff_fresh:
-            self._brake()
+        diag = self.diagnostics
+        for source in tick.missing:
+            diag.count(f"missing.{source.value}")
+        for source in tick.late:
+            diag.count(f"late.{source.value}")
+        if tick.missing or tick.late:
+            diag.count("late_samples")
+        if tick.action is Action.BRAKE:
+            self._brake(tick.braking_starts)
         else:
-            if self._braking:
+            if tick.braking_ends:
                 self.get_logger().info("nominal torque back: releasing the brake")
-                self._braking = False
-                self.diagnostics.level = DiagnosticStatus.OK
-                self.diagnostics.message = "ok"
-            du = fb[1] if fb_fresh and fb is not None else np.zeros(len(self.joint_names))
-            if not fb_fresh:
-                self.diagnostics.count("feedback_missing_samples")
-                self.diagnostics.level = DiagnosticStatus.WARN
-                self.diagnostics.message = "no fresh feedback torque: applying nominal torque only"
-            elif self.diagnostics.level == DiagnosticStatus.WARN:
-                self.diagnostics.level = DiagnosticStatus.OK
-                self.diagnostics.message = "ok"
-            assert ff is not None
-            self._step(ff[1] + du)
+                diag.level, diag.message = DiagnosticStatus.OK, "ok"
+            if tick.action is Action.NOMINAL_ONLY:
+                diag.count("feedback_missing_samples")
+                diag.level = DiagnosticStatus.WARN
+                diag.message = "no fresh feedback torque: applying nominal torque only"
+            elif diag.level == DiagnosticStatus.WARN:
+                diag.level, diag.message = DiagnosticStatus.OK, "ok"
+            assert tick.tau is not None
+            self._step(tick.tau)
         if hasattr(self, "_last_tick"):
             period = now - self._last_tick
-            self.diagnostics.time("period", period)
-            self.diagnostics.time("jitter", abs(period - self.plant.config.period))
+            diag.time("period", period)
+            diag.time("jitter", abs(period - self.plant.config.period))
         self._last_tick = now
         self._publish_state()
         if self.n_samples and self.k >= self.n_samples:
             self._finish()
 
-    def _brake(self) -> None:
-        if not self._braking:
+    def _brake(self, starts: bool) -> None:
+        if starts:
             self.get_logger().error(
                 f"no fresh nominal torque for {self._values['watchdog_s']} s: braking"
             )
-            self._braking = True
             self.diagnostics.count("watchdog_trips")
         self.diagnostics.level = DiagnosticStatus.ERROR
         self.diagnostics.message = "no nominal torque: brakes engaged (holding position)"
-        self.plant.qd = np.zeros(len(self.joint_names))
-        self.plant.k += 1
+        self.plant.brake()
         self._applied = np.zeros(len(self.joint_names))
         self.diagnostics.count("braked_samples")
 

@@ -229,6 +229,11 @@ class Plant:
         self.k += 1
         return PlantStep(q=q.copy(), qd=qd.copy(), applied=applied, saturated=saturated)
 
+    def brake(self) -> None:
+        """Hold the arm over one period: velocity zero, position kept (a PUMA's brakes)."""
+        self.qd = np.zeros(self._n)
+        self.k += 1
+
     def energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         """Kinetic plus potential energy (J), for conservation checks."""
         kinetic = pin.computeKineticEnergy(self._model, self._data, q, qd)
