@@ -1116,7 +1116,7 @@ def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     assert outcome.ok, outcome.message
     run = load_run(outcome.path)
     limit = ROBOT.effort_limit
-    effort = run.effort[1:]
+    effort = run.applied[1:]
     assert np.all(np.isfinite(effort))
     assert np.all(np.abs(effort) <= limit)
     saturated_rows = np.any(np.abs(effort) == limit, axis=1)

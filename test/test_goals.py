@@ -34,10 +34,10 @@ def queue(robot, first_goal=None) -> GoalQueue:
     )
 
 
-def goal(times_s, positions, velocities=None) -> wire.Waypoints:
+def goal(times_s, positions, velocities=None) -> wire.TrajectoryGoal:
     positions = np.atleast_2d(np.asarray(positions, dtype=float))
     vel = None if velocities is None else np.atleast_2d(np.asarray(velocities, dtype=float))
-    return wire.Waypoints(np.asarray(times_s, dtype=float), positions, vel, None)
+    return wire.TrajectoryGoal(np.asarray(times_s, dtype=float), positions, vel, None)
 
 
 def keep(sp: Setpoint) -> Setpoint:

@@ -31,15 +31,15 @@ def _compare(recorded, offline) -> None:
             getattr(recorded, name), getattr(offline, name), rtol=0, atol=1e-12, err_msg=name
         )
     # joint_states(k).effort is what was applied over [(k-1)T, kT).
-    assert np.all(np.isnan(recorded.effort[0]))
-    np.testing.assert_allclose(recorded.effort[1:], offline.applied[:-1], rtol=0, atol=1e-12)
+    assert np.all(np.isnan(recorded.applied[0]))
+    np.testing.assert_allclose(recorded.applied[1:], offline.applied[:-1], rtol=0, atol=1e-12)
 
 
 def _compare_identification(recorded, offline) -> None:
     np.testing.assert_allclose(recorded.trace_p, offline.trace_p, rtol=1e-12)
     np.testing.assert_allclose(recorded.residual_norm[1:], offline.residual_norm[1:], rtol=1e-12)
-    theta = np.concatenate([offline.F, offline.G, offline.w[:, :, None]], axis=2)
-    np.testing.assert_allclose(recorded.theta, theta, rtol=0, atol=1e-12)
+    theta_t = np.concatenate([offline.F, offline.G, offline.w[:, :, None]], axis=2)
+    np.testing.assert_allclose(recorded.theta_t, theta_t, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize(

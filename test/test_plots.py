@@ -28,18 +28,18 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 def to_recorded(result: RunResult, scenario: Scenario) -> RecordedRun:
     """A RunResult as a recording would store it."""
-    effort = np.full_like(result.applied, np.nan)
-    effort[1:] = result.applied[:-1]
-    theta = None
+    applied = np.full_like(result.applied, np.nan)
+    applied[1:] = result.applied[:-1]
+    theta_t = None
     if result.F is not None:
-        theta = np.concatenate([result.F, result.G, result.w[:, :, None]], axis=2)
+        theta_t = np.concatenate([result.F, result.G, result.w[:, :, None]], axis=2)
     return RecordedRun(
         path=Path("offline"),
         joint_names=tuple(result.joint_names),
         t=result.t,
         q=result.q,
         qd=result.qd,
-        effort=effort,
+        applied=applied,
         q_d=result.q_d,
         qd_d=result.qd_d,
         qdd_d=result.qdd_d,
@@ -47,7 +47,7 @@ def to_recorded(result: RunResult, scenario: Scenario) -> RecordedRun:
         du=result.du,
         trace_p=result.trace_p,
         residual_norm=result.residual_norm,
-        theta=theta,
+        theta_t=theta_t,
         run={
             "controller": result.meta.get("controller"),
             "scenario": {
@@ -74,7 +74,7 @@ def synthetic(error_deg: np.ndarray, period: float = 0.01) -> RecordedRun:
         t=np.arange(rows) * period,
         q=np.deg2rad(error_deg),
         qd=zeros,
-        effort=zeros,
+        applied=zeros,
         q_d=zeros,
         qd_d=zeros,
         qdd_d=zeros,
@@ -82,7 +82,7 @@ def synthetic(error_deg: np.ndarray, period: float = 0.01) -> RecordedRun:
         du=zeros,
         trace_p=nan,
         residual_norm=nan,
-        theta=None,
+        theta_t=None,
         run={"scenario": {"segment_times": [rows * period / 2], "period": period}},
     )
 
@@ -196,9 +196,9 @@ def test_applied_torques_are_steps_over_the_period_they_were_applied(case_c):
         assert "torque" in ax.get_ylabel() and "N m" in ax.get_ylabel()
         for label, run in case_c.items():
             drawn = line(ax, label)
-            assert drawn.get_drawstyle() == "steps-pre"  # effort[k] spans [t[k-1], t[k])
+            assert drawn.get_drawstyle() == "steps-pre"  # applied[k] spans [t[k-1], t[k])
             np.testing.assert_array_equal(drawn.get_xdata(), run.t)
-            np.testing.assert_allclose(drawn.get_ydata(), sign * run.effort[:, j])
+            np.testing.assert_allclose(drawn.get_ydata(), sign * run.applied[:, j])
         nominal = line(ax, "nominal u_n (feedforward)")
         assert nominal.get_drawstyle() == "steps-post"  # u_n(k) is held over [t[k], t[k+1])
     assert {"computed torque", "adaptive P2(0)", "end of move"} <= set(legend_texts(fig))
@@ -211,9 +211,9 @@ def test_identified_parameters_draw_theta_and_refuse_runs_without_it(case_c, tmp
     ax_g, ax_f, ax_w, ax_p = fig.axes[:4]
     for i in range(n):
         label = f"joint {i + 1}"
-        np.testing.assert_allclose(line(ax_g, label).get_ydata(), run.theta[:, n + i, 2 * n + i])
-        np.testing.assert_allclose(line(ax_f, label).get_ydata(), run.theta[:, n + i, i])
-        np.testing.assert_allclose(line(ax_w, label).get_ydata(), run.theta[:, n + i, 3 * n])
+        np.testing.assert_allclose(line(ax_g, label).get_ydata(), run.theta_t[:, n + i, 2 * n + i])
+        np.testing.assert_allclose(line(ax_f, label).get_ydata(), run.theta_t[:, n + i, i])
+        np.testing.assert_allclose(line(ax_w, label).get_ydata(), run.theta_t[:, n + i, 3 * n])
     assert ax_p.get_yscale() == "log" and fig.axes[4].get_yscale() == "log"  # trace(P), residual
     assert "Ĝ" in ax_g.get_ylabel() and "F̂" in ax_f.get_ylabel() and "rad/s" in ax_w.get_ylabel()
     assert ax_w.get_xlabel() == ax_p.get_xlabel() == "time (s)"

@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 
 from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
-from apc_core.wire import JointSample, Setpoint
+from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.robot_loop import CommandMap, RobotLoop
@@ -27,7 +27,7 @@ NAMES = ("a", "b")
 
 def _setpoint(k, q, qd=0.0, u_n=0.0):
     v = np.full(2, 1.0)
-    return Setpoint(k * T, q * v, qd * v, 0.0 * v, u_n * v, 0)
+    return SetpointStamped(k * T, q * v, qd * v, 0.0 * v, u_n * v, 0)
 
 
 def _state(stamp, q, qd=0.0):
@@ -213,7 +213,7 @@ def _closed_loop(duration_s, goal_deg=None, driver_ms=2.0, phase_ms=0.3, payload
             sp = ff[0].sample(j)
             steps.append(
                 loop.on_setpoint(
-                    Setpoint(j * T, sp.q, sp.qd, sp.qdd, sp.u_n, 0), start=start and j == k
+                    SetpointStamped(j * T, sp.q, sp.qd, sp.qdd, sp.u_n, 0), start=start and j == k
                 )
             )
         ff[1] = k + 2

@@ -34,8 +34,8 @@ def state(k: int, q: float = 0.0, effort: float | None = 1.0, stamp: int | None 
     )
 
 
-def setpoint(k: int, q: float = 0.0, stamp: int | None = None) -> wire.Setpoint:
-    return wire.Setpoint(
+def setpoint(k: int, q: float = 0.0, stamp: int | None = None) -> wire.SetpointStamped:
+    return wire.SetpointStamped(
         stamp_ns=k * T if stamp is None else stamp,
         q=np.full(N, q),
         qd=np.zeros(N),
@@ -133,7 +133,7 @@ def test_set_points_for_done_samples_copy_duplicate_or_stale():
     assert decision.verdict is Verdict.REJECTED and "stale stamp 0 ns" in decision.reason
     # time_from_start is part of the copy.
     moved = setpoint(0)
-    moved = wire.Setpoint(moved.stamp_ns, moved.q, moved.qd, moved.qdd, moved.u_n, 1)
+    moved = wire.SetpointStamped(moved.stamp_ns, moved.q, moved.qd, moved.qdd, moved.u_n, 1)
     assert pairer.offer_setpoint(moved).verdict is Verdict.REJECTED
 
 

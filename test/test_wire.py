@@ -460,20 +460,20 @@ ACC = np.arange(9.0).reshape(3, 3) + 100.0
 
 def test_waypoints_round_trip_every_field_and_reorder():
     times = [0.5, 1.25, 3.0]
-    out = wire.msg_to_waypoints(_wire_round_trip(_goal(NAMES, times, POS, VEL, ACC)), NAMES)
+    out = wire.msg_to_trajectory_goal(_wire_round_trip(_goal(NAMES, times, POS, VEL, ACC)), NAMES)
     times_s, positions, velocities, accelerations = out  # unpacks as a 4-tuple
     np.testing.assert_array_equal(times_s, times)
     np.testing.assert_array_equal(positions, POS)
     np.testing.assert_array_equal(velocities, VEL)
     np.testing.assert_array_equal(accelerations, ACC)
     permuted = _goal([NAMES[i] for i in PERM], times, POS[:, PERM], VEL[:, PERM], ACC[:, PERM])
-    again = wire.msg_to_waypoints(permuted, NAMES)
+    again = wire.msg_to_trajectory_goal(permuted, NAMES)
     for a, b in zip(again, out, strict=True):
         np.testing.assert_array_equal(a, b)
 
 
 def test_waypoints_without_velocities_or_accelerations():
-    out = wire.msg_to_waypoints(_goal(NAMES, [1.0, 2.0, 3.0], POS), NAMES)
+    out = wire.msg_to_trajectory_goal(_goal(NAMES, [1.0, 2.0, 3.0], POS), NAMES)
     assert out.velocities is None and out.accelerations is None
     np.testing.assert_array_equal(out.positions, POS)
 
@@ -528,7 +528,7 @@ WAYPOINT_REJECTIONS = {
 def test_waypoint_rejections_name_the_field(case):
     build, pattern = WAYPOINT_REJECTIONS[case]
     with pytest.raises(WireError, match=pattern):
-        wire.msg_to_waypoints(build(), NAMES)
+        wire.msg_to_trajectory_goal(build(), NAMES)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -554,7 +554,7 @@ def test_estimate_round_trip_every_field(n):
     np.testing.assert_array_equal(est.F, F)
     np.testing.assert_array_equal(est.G, G)
     np.testing.assert_array_equal(est.w, w)
-    np.testing.assert_array_equal(est.theta, theta)
+    np.testing.assert_array_equal(est.theta_t, theta)
     assert (est.trace_p, est.residual_norm) == (12.5, 0.25)
     refilled = wire.estimate_to_msg(F, G, w, 1.0, 2.0, stamp_ns=stamp + 1, msg=msg)
     assert refilled is msg and wire.msg_to_estimate(msg).stamp_ns == stamp + 1

@@ -228,7 +228,7 @@ class FeedbackNode(Node):
             # Built only for a listener (a recorder): a fifth of the node's work per sample.
             if self.estimate_pub.get_subscription_count() > 0:
                 try:
-                    estimate = wire.theta_to_estimate_msg(
+                    estimate = wire.theta_t_to_estimate_msg(
                         rls.model_view(),
                         out.trace_p,
                         residual,

@@ -53,7 +53,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from apc_core.wire import JointSample, Setpoint
+from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.controller import FeedbackLaw
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
 
@@ -157,7 +157,7 @@ class RobotLoop:
         self.faulted = False  # watchdog: silent until a fresh state
         self._restart = False  # the next sample taken is a start
         self._start_stamp: int | None = None  # waiting for the set point answering it
-        self._setpoints: dict[int, Setpoint] = {}
+        self._setpoints: dict[int, SetpointStamped] = {}
         self._pending: JointSample | None = None  # sample waiting for its set point
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self._taken_stamp: int | None = None  # stamp of the newest sample taken
@@ -218,7 +218,7 @@ class RobotLoop:
         step = self._try()
         return step if step.start else step._replace(sample=take.sample)
 
-    def on_setpoint(self, setpoint: Setpoint, start: bool) -> Step:
+    def on_setpoint(self, setpoint: SetpointStamped, start: bool) -> Step:
         """A validated set point (model order); ``start`` if it answers a start sample."""
         stamp = setpoint.stamp_ns
         if self._start_stamp is not None:

@@ -114,7 +114,7 @@ class Step:
     k: int
     stamp_ns: int
     state: wire.JointSample
-    setpoint: wire.Setpoint
+    setpoint: wire.SetpointStamped
     applied: np.ndarray | None
 
     def law_inputs(self) -> tuple:
@@ -144,7 +144,7 @@ _RESENT = Decision(Verdict.RESENT)
 _COPY = Decision(Verdict.COPY)
 
 
-def same_setpoint(used: wire.Setpoint | None, other: wire.Setpoint) -> bool:
+def same_setpoint(used: wire.SetpointStamped | None, other: wire.SetpointStamped) -> bool:
     """Whether ``other`` is a bit-identical copy of the set point ``used`` for its sample."""
     return (
         used is not None
@@ -187,8 +187,8 @@ class SamplePairer:
         #: Stamp of the newest step returned (None before the first).
         self.done_ns: int | None = None
         self._states: dict[int, wire.JointSample] = {}
-        self._setpoints: dict[int, wire.Setpoint] = {}
-        self._used: dict[int, wire.Setpoint] = {}
+        self._setpoints: dict[int, wire.SetpointStamped] = {}
+        self._used: dict[int, wire.SetpointStamped] = {}
 
     def offer_state(self, sample: wire.JointSample) -> Decision:
         """Sample ``k``'s joint state (from a :class:`JointStateSampler`)."""
@@ -199,7 +199,7 @@ class SamplePairer:
             return self._stale(stamp)
         return self._hold(self._states, stamp, sample)
 
-    def offer_setpoint(self, setpoint: wire.Setpoint) -> Decision:
+    def offer_setpoint(self, setpoint: wire.SetpointStamped) -> Decision:
         """The set point stamped ``kT`` (from the feedforward)."""
         stamp = setpoint.stamp_ns
         try:
@@ -218,7 +218,9 @@ class SamplePairer:
     def _stale(stamp: int) -> Decision:
         return Decision(Verdict.REJECTED, reason=f"stale stamp {stamp} ns")
 
-    def _hold(self, pending: dict, stamp: int, half: wire.JointSample | wire.Setpoint) -> Decision:
+    def _hold(
+        self, pending: dict, stamp: int, half: wire.JointSample | wire.SetpointStamped
+    ) -> Decision:
         if stamp in pending:
             return _DUPLICATE
         pending[stamp] = half

@@ -103,11 +103,11 @@ class GoalQueue:
         self.first_goal = first_goal
         self.move = dict(move or {})
         self.feedforward: Feedforward | None = None
-        self.queued: list[wire.Waypoints] = []
+        self.queued: list[wire.TrajectoryGoal] = []
         self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
 
     # -- goals ----------------------------------------------------------------------------------
-    def add(self, goal: wire.Waypoints) -> None:
+    def add(self, goal: wire.TrajectoryGoal) -> None:
         """Queue a goal; raises ValueError (WireError, TrajectoryError) naming what is wrong."""
         self._check_limits(goal.positions)
         if len(self.queued) >= MAX_QUEUED_GOALS:
@@ -118,7 +118,7 @@ class GoalQueue:
         self.queued.append(goal)
 
     @staticmethod
-    def _plan(start: np.ndarray, goal: wire.Waypoints) -> Trajectory:
+    def _plan(start: np.ndarray, goal: wire.TrajectoryGoal) -> Trajectory:
         return Waypoints(
             start,
             goal.times_s,

@@ -143,7 +143,7 @@ class FeedforwardNode(Node):
 
     def _on_goal(self, msg: JointTrajectory) -> None:
         try:
-            goal = wire.msg_to_waypoints(msg, self.joint_names)
+            goal = wire.msg_to_trajectory_goal(msg, self.joint_names)
             self.goals.add(goal)
         except ValueError as exc:  # WireError, TrajectoryError
             reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)

@@ -46,7 +46,7 @@ def analyze_file(path: str | Path) -> dict[str, Any]:
     """Metrics of one recording as a JSON-ready dict."""
     run = load_run(path)
     # joint_states(k).effort is the torque applied over [(k-1)T, kT): shift it back one row.
-    applied = np.vstack([run.effort[1:], np.full((1, len(run.joint_names)), np.nan)])
+    applied = np.vstack([run.applied[1:], np.full((1, len(run.joint_names)), np.nan)])
     metrics = compute_metrics(
         run.joint_names,
         run.q,
@@ -129,7 +129,7 @@ def write_report(out: Path, recordings: Sequence[str], results: Sequence[dict[st
         ),
     ]
     for name, run in runs.items():
-        if run.theta is not None:
+        if run.theta_t is not None:
             figures.append(
                 plots.identified_parameters(
                     run, out / f"identified_{name}.png", f"Identified parameters: {name}"

@@ -429,7 +429,7 @@ def summarize(path: Path) -> str:
     return (
         f"{path.name}: {len(run.t)} samples, max |e| {fmt(err[: end + 1].max(axis=0))} deg, "
         f"final |e| {fmt(err[end])} deg, peak |tau| "
-        f"{'/'.join(f'{v:.1f}' for v in np.nanmax(np.abs(run.effort), axis=0))} N m"
+        f"{'/'.join(f'{v:.1f}' for v in np.nanmax(np.abs(run.applied), axis=0))} N m"
     )
 
 

@@ -424,9 +424,9 @@ def _figure_applied_torques(
                 label="nominal u_n (feedforward)",
             )
         for i, (label, run) in enumerate(runs.items()):
-            # effort[k] was applied over [t[k-1], t[k]): a "pre" step draws it on that interval.
+            # applied[k] is the torque over [t[k-1], t[k]): a "pre" step draws it on that interval.
             ax.step(
-                run.t, run.effort[:, j] * signs[j], where="pre", label=label, linewidth=1.3,
+                run.t, run.applied[:, j] * signs[j], where="pre", label=label, linewidth=1.3,
                 **_style(i),
             )  # fmt: skip
         ax.set_ylabel(_joint_label(j, "torque", "N m", paper_signs))
@@ -458,7 +458,7 @@ def applied_torques(
 ) -> Path:
     """The paper's Figure 9: applied torque per joint against time, one line per controller.
 
-    ``effort[k]`` is the torque applied over ``[t[k-1], t[k])`` and is drawn as a step over that
+    ``applied[k]`` is the torque applied over ``[t[k-1], t[k])`` and is drawn as a step over that
     interval (``where="pre"``); row 0 (NaN) draws nothing.
 
     Parameters
@@ -489,23 +489,23 @@ def applied_torques(
 
 def _figure_identified_parameters(run: RecordedRun, title: str | None = None) -> Figure:
     """Build the figure of :func:`identified_parameters` without saving it."""
-    if run.theta is None:
+    if run.theta_t is None:
         raise ValueError(
-            "this run has no identified parameters (theta is None): only the adaptive law "
+            "this run has no identified parameters (theta_t is None): only the adaptive law "
             "publishes estimates"
         )
-    theta = np.asarray(run.theta, dtype=float)
+    theta_t = np.asarray(run.theta_t, dtype=float)
     n = run.q.shape[1]
-    if theta.shape[1:] != (2 * n, 3 * n + 1):
-        raise ValueError(f"theta has shape {theta.shape}, expected (N, {2 * n}, {3 * n + 1})")
+    if theta_t.shape[1:] != (2 * n, 3 * n + 1):
+        raise ValueError(f"theta_t has shape {theta_t.shape}, expected (N, {2 * n}, {3 * n + 1})")
     fig, axes = _new_figure((12.0, 8.0), 2, 2, sharex=True)
     ax_g, ax_f, ax_w, ax_p = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
     t = run.t
     for i in range(n):
         style = {"color": f"C{i}", "linewidth": 1.3, "label": f"joint {i + 1}"}
-        ax_g.plot(t, theta[:, n + i, 2 * n + i], **style)
-        ax_f.plot(t, theta[:, n + i, i], **style)
-        ax_w.plot(t, theta[:, n + i, 3 * n], **style)
+        ax_g.plot(t, theta_t[:, n + i, 2 * n + i], **style)
+        ax_f.plot(t, theta_t[:, n + i, i], **style)
+        ax_w.plot(t, theta_t[:, n + i, 3 * n], **style)
     ax_g.set_title("(a) Ĝ velocity block, diagonal (≈ T D⁻¹)", fontsize=10)
     ax_g.set_ylabel("Ĝ[n+i, i] (rad/s per N m)")
     ax_f.set_title("(b) F̂ gravity stiffness (velocity row i, position column i)", fontsize=10)
@@ -556,7 +556,7 @@ def identified_parameters(run: RecordedRun, out: str | Path, title: str | None =
     Parameters
     ----------
     run : RecordedRun
-        A run of the adaptive law (``theta`` of shape (N, 2n, 3n+1)).
+        A run of the adaptive law (``theta_t`` of shape (N, 2n, 3n+1)).
     out : path
         PNG file to write.
     title : str, optional
@@ -570,7 +570,7 @@ def identified_parameters(run: RecordedRun, out: str | Path, title: str | None =
     Raises
     ------
     ValueError
-        If the run has no identified parameters (``theta is None``: not an adaptive run).
+        If the run has no identified parameters (``theta_t is None``: not an adaptive run).
     """
     fig = _figure_identified_parameters(run, title)
     return _save(fig, out)

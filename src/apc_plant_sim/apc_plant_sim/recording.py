@@ -27,16 +27,17 @@ class RecordedRun:
         Sample times (s) of the ``joint_states`` messages.
     q, qd : (N, n)
         Measured state (rad, rad/s).
-    effort : (N, n)
-        Torque applied over the period that *ended* at the sample (N m); NaN at the first.
+    applied : (N, n)
+        Torque applied over the period that *ended* at the sample, as ``joint_states(k)``
+        reports it in ``effort`` (N m); NaN at the first.
     q_d, qd_d, qdd_d, u_n : (N, n)
         Set point and nominal torque.
     du : (N, n)
         Feedback torque.
     trace_p, residual_norm : (N,)
         Identification telemetry (NaN without an adaptive law).
-    theta : (N, 2n, 3n+1) or None
-        ``[F̂ Ĝ ŵ]`` per sample.
+    theta_t : (N, 2n, 3n+1) or None
+        Θᵀ = ``[F̂ Ĝ ŵ]`` per sample.
     run : dict
         The experiment description stored in the file (``custom_data['apc.run']``), if any.
     """
@@ -46,7 +47,7 @@ class RecordedRun:
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
-    effort: np.ndarray
+    applied: np.ndarray
     q_d: np.ndarray
     qd_d: np.ndarray
     qdd_d: np.ndarray
@@ -54,7 +55,7 @@ class RecordedRun:
     du: np.ndarray
     trace_p: np.ndarray
     residual_norm: np.ndarray
-    theta: np.ndarray | None
+    theta_t: np.ndarray | None
     run: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -110,15 +111,15 @@ def load_run(path: str | Path) -> RecordedRun:
     def blank(*shape: int) -> np.ndarray:
         return np.full((rows, *shape), np.nan)
 
-    q, qd, effort = blank(n), blank(n), blank(n)
+    q, qd, applied = blank(n), blank(n), blank(n)
     q_d, qd_d, qdd_d, u_n, du = blank(n), blank(n), blank(n), blank(n), blank(n)
     trace_p, residual = blank(), blank()
-    theta = None
+    theta_t = None
     for i, stamp in enumerate(stamps):
         js = wire.joint_state_to_arrays(states[stamp], names, require=("position", "velocity"))
         q[i], qd[i] = js.position, js.velocity
         if js.effort is not None:
-            effort[i] = js.effort
+            applied[i] = js.effort
         if stamp in setpoints:
             sp = wire.msg_to_setpoint(setpoints[stamp], names)
             q_d[i], qd_d[i], qdd_d[i], u_n[i] = sp.q, sp.qd, sp.qdd, sp.u_n
@@ -127,16 +128,16 @@ def load_run(path: str | Path) -> RecordedRun:
         if stamp in estimates:
             est = estimates[stamp]
             trace_p[i], residual[i] = est.trace_p, est.residual_norm
-            if theta is None:
-                theta = np.full((rows, *est.theta.shape), np.nan)
-            theta[i] = est.theta
+            if theta_t is None:
+                theta_t = np.full((rows, *est.theta_t.shape), np.nan)
+            theta_t[i] = est.theta_t
     return RecordedRun(
         path=path,
         joint_names=names,
         t=np.array(stamps, dtype=float) / wire.NS_PER_S,
         q=q,
         qd=qd,
-        effort=effort,
+        applied=applied,
         q_d=q_d,
         qd_d=qd_d,
         qdd_d=qdd_d,
@@ -144,6 +145,6 @@ def load_run(path: str | Path) -> RecordedRun:
         du=du,
         trace_p=trace_p,
         residual_norm=residual,
-        theta=theta,
+        theta_t=theta_t,
         run=run or {},
     )

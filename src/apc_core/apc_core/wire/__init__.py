@@ -32,6 +32,10 @@ Conventions
 - Joint order comes from ``name`` (``joint_names``), never from the position in the array: every
   reader reorders to the order the caller asks for.
 - Units: positions rad (or m), velocities rad/s, accelerations rad/s², torques N·m (or N).
+- A reading keeps the message's field names (``JointSample.effort``); past the border apc
+  names a torque by what it is: ``applied`` for what ``joint_states(k).effort`` carries, the
+  torque the arm applied over the period that ended at sample k; ``u_n`` and ``du`` for the two
+  commands. ``theta_t`` is Θᵀ = [F G w] (the estimate), never Θ = [F G w]ᵀ of Eq. 22.
 - Nothing non-finite is published or accepted: the writers raise :class:`WireError` rather than
   publish garbage, the readers raise it rather than hand garbage to a controller.
 """
@@ -43,7 +47,7 @@ from apc_core.wire.estimate import (
     Estimate,
     estimate_to_msg,
     msg_to_estimate,
-    theta_to_estimate_msg,
+    theta_t_to_estimate_msg,
 )
 from apc_core.wire.fields import DEFAULT_MAX_ABS, WireError
 from apc_core.wire.joint_state import (
@@ -56,10 +60,10 @@ from apc_core.wire.joint_state import (
     torque_to_msg,
 )
 from apc_core.wire.joint_trajectory import (
-    Setpoint,
-    Waypoints,
+    SetpointStamped,
+    TrajectoryGoal,
     msg_to_setpoint,
-    msg_to_waypoints,
+    msg_to_trajectory_goal,
     setpoint_to_msg,
 )
 from apc_core.wire.stamps import (
@@ -114,10 +118,10 @@ __all__ = [
     "TRAJECTORY_GOAL_QOS",
     "Estimate",
     "JointSample",
-    "Setpoint",
+    "SetpointStamped",
     "TopicSpec",
     "Torque",
-    "Waypoints",
+    "TrajectoryGoal",
     "WireError",
     "arrays_to_joint_state",
     "duration_to_ns",
@@ -126,7 +130,7 @@ __all__ = [
     "msg_to_estimate",
     "msg_to_setpoint",
     "msg_to_torque",
-    "msg_to_waypoints",
+    "msg_to_trajectory_goal",
     "ns_to_duration",
     "ns_to_stamp",
     "sample_index",
@@ -134,7 +138,7 @@ __all__ = [
     "seconds_to_ns",
     "setpoint_to_msg",
     "stamp_to_ns",
-    "theta_to_estimate_msg",
+    "theta_t_to_estimate_msg",
     "topic_spec",
     "torque_to_msg",
 ]

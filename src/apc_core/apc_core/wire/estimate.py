@@ -11,11 +11,15 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from apc_core.wire.fields import WireError, check_finite, to_double_array
 
-#: ``layout.dim[0].label`` of an estimate: rows of Θ = [F G w] (p = 2n).
+# Θ is the paper's parameter matrix [F G w]ᵀ, (3n+1, 2n) (Eq. 22); the estimate carries its
+# transpose Θᵀ = [F G w], (2n, 3n+1), one row per state entry, as the identifier holds it.
+# ``theta_t`` names Θᵀ here and wherever an estimate is read; the two labels below are part of
+# the recorded message format and keep their spelling.
+#: ``layout.dim[0].label`` of an estimate: the rows of Θᵀ = [F G w] (p = 2n).
 ESTIMATE_ROWS_LABEL = "theta_rows"
-#: ``layout.dim[1].label`` of an estimate: columns of Θ (p + m + 1 = 3n + 1).
+#: ``layout.dim[1].label`` of an estimate: the columns of Θᵀ (p + n + 1 = 3n + 1).
 ESTIMATE_COLS_LABEL = "theta_cols"
-#: The scalars after Θ in ``data``, in order.
+#: The scalars after Θᵀ in ``data``, in order.
 ESTIMATE_TRAILER = ("trace_p", "residual_norm", "stamp_ns")
 
 
@@ -29,7 +33,7 @@ class Estimate:
         Sample time ``kT`` the estimate was computed at (after the update with sample k).
     F : (p, p) ndarray
         State matrix estimate F̂ of ``δx(k+1) = F δx(k) + G δu(k) + w``.
-    G : (p, m) ndarray
+    G : (p, n) ndarray
         Input matrix estimate Ĝ.
     w : (p,) ndarray
         Offset estimate ŵ.
@@ -47,8 +51,8 @@ class Estimate:
     residual_norm: float
 
     @property
-    def theta(self) -> np.ndarray:
-        """Θ = [F G w], shape (p, p + m + 1), so that ``δx(k+1) = Θ z(k)``."""
+    def theta_t(self) -> np.ndarray:
+        """Θᵀ = [F G w], shape (p, p + n + 1), so that ``δx(k+1) = Θᵀ z(k)`` (Eq. 25)."""
         return np.hstack([self.F, self.G, self.w[:, None]])
 
 
@@ -64,12 +68,12 @@ def estimate_to_msg(
 ) -> Float64MultiArray:
     """Pack an RLS estimate into a ``std_msgs/Float64MultiArray``.
 
-    Layout (``p`` = state size 2n, ``m`` = input size n, ``c = p + m + 1`` = 3n + 1):
+    Layout (``p`` = state size 2n, ``n`` = input size, ``c = p + n + 1`` = 3n + 1):
 
     - ``layout.dim[0]``: label ``"theta_rows"``, size ``p``, stride ``p * c``;
       ``layout.dim[1]``: label ``"theta_cols"``, size ``c``, stride ``c``; ``data_offset = 0``.
-      So the layout describes, in the standard MultiArray way, the matrix Θ = [F G w] stored
-      row-major in ``data[0 : p*c]`` (any MultiArray viewer shows Θ correctly).
+      So the layout describes, in the standard MultiArray way, the matrix Θᵀ = [F G w] stored
+      row-major in ``data[0 : p*c]`` (any MultiArray viewer shows Θᵀ correctly).
     - ``data[p*c : p*c + 3]`` = ``[trace_p, residual_norm, stamp_ns]``
       (:data:`ESTIMATE_TRAILER`): two health scalars, then the sample time.
 
@@ -80,7 +84,7 @@ def estimate_to_msg(
     Parameters
     ----------
     F : (p, p) array_like
-    G : (p, m) array_like
+    G : (p, n) array_like
     w : (p,) array_like
     trace_p, residual_norm : float
     stamp_ns : int
@@ -104,17 +108,17 @@ def estimate_to_msg(
         raise WireError(f"F: shape {F.shape}, expected square (p, p) with p > 0")
     p = F.shape[0]
     if G.ndim != 2 or G.shape[0] != p or G.shape[1] == 0:
-        raise WireError(f"G: shape {G.shape}, expected ({p}, m) with m > 0")
+        raise WireError(f"G: shape {G.shape}, expected ({p}, n) with n > 0")
     if w.shape != (p,):
         raise WireError(f"w: shape {w.shape}, expected ({p},)")
     for field, values in (("F", F), ("G", G), ("w", w)):
         check_finite(values, field, (), math.inf)
-    return theta_to_estimate_msg(
+    return theta_t_to_estimate_msg(
         np.hstack([F, G, w[:, None]]), trace_p, residual_norm, stamp_ns=stamp_ns, msg=msg
     )
 
 
-def theta_to_estimate_msg(
+def theta_t_to_estimate_msg(
     theta_t: Any,
     trace_p: float,
     residual_norm: float,
@@ -128,21 +132,21 @@ def theta_to_estimate_msg(
     Raises
     ------
     WireError
-        On a shape that is not (p, p + m + 1) with m > 0, non-finite values, or a stamp outside
+        On a shape that is not (p, p + n + 1) with n > 0, non-finite values, or a stamp outside
         ``[0, 2**53]`` ns.
     """
-    theta = np.asarray(theta_t, dtype=np.float64)
-    if theta.ndim != 2 or theta.shape[0] == 0 or theta.shape[1] < theta.shape[0] + 2:
-        raise WireError(f"theta: shape {theta.shape}, expected (p, p + m + 1) with m > 0")
+    theta_t = np.asarray(theta_t, dtype=np.float64)
+    if theta_t.ndim != 2 or theta_t.shape[0] == 0 or theta_t.shape[1] < theta_t.shape[0] + 2:
+        raise WireError(f"theta_t: shape {theta_t.shape}, expected (p, p + n + 1) with n > 0")
     if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, (int, np.integer)):
         raise WireError(f"stamp_ns: must be integer nanoseconds, got {type(stamp_ns).__name__}")
     if not 0 <= stamp_ns <= 2**53:
         raise WireError(f"stamp_ns: {stamp_ns} is outside [0, 2**53] (not exact as float64)")
-    rows, cols = theta.shape
+    rows, cols = theta_t.shape
     data = np.empty(rows * cols + 3)
-    data[: rows * cols] = theta.ravel()
+    data[: rows * cols] = theta_t.ravel()
     data[rows * cols :] = (trace_p, residual_norm, float(stamp_ns))
-    check_finite(data[: rows * cols], "theta", (), math.inf)
+    check_finite(data[: rows * cols], "theta_t", (), math.inf)
     check_finite(data[rows * cols : rows * cols + 1], "trace_p", (), math.inf)
     check_finite(data[rows * cols + 1 : rows * cols + 2], "residual_norm", (), math.inf)
     if msg is None:
@@ -173,7 +177,9 @@ def msg_to_estimate(msg: Float64MultiArray) -> Estimate:
     """
     dims = msg.layout.dim
     if len(dims) != 2:
-        raise WireError(f"layout.dim: expected 2 dimensions (theta rows, cols), got {len(dims)}")
+        raise WireError(
+            f"layout.dim: expected 2 dimensions (rows and columns of Θᵀ), got {len(dims)}"
+        )
     d0, d1 = dims
     if (d0.label, d1.label) != (ESTIMATE_ROWS_LABEL, ESTIMATE_COLS_LABEL):
         raise WireError(
@@ -182,7 +188,7 @@ def msg_to_estimate(msg: Float64MultiArray) -> Estimate:
         )
     p, c = d0.size, d1.size
     if p == 0 or c < p + 2:
-        raise WireError(f"layout.dim: sizes ({p}, {c}), expected (p, p + m + 1) with p, m > 0")
+        raise WireError(f"layout.dim: sizes ({p}, {c}), expected (p, p + n + 1) with p, n > 0")
     if d1.stride != c or d0.stride != p * c:
         raise WireError(
             f"layout.dim: strides ({d0.stride}, {d1.stride}), expected ({p * c}, {c}) (row-major)"
@@ -194,7 +200,7 @@ def msg_to_estimate(msg: Float64MultiArray) -> Estimate:
         raise WireError(f"data: length {len(msg.data)}, expected {expected} (p*c + 3)")
     data = np.array(msg.data, dtype=np.float64)
     check_finite(data[: p * c], "data", (), math.inf)
-    theta = data[: p * c].reshape(p, c)
+    theta_t = data[: p * c].reshape(p, c)
     trace_p, residual_norm, stamp = (float(v) for v in data[p * c :])
     for name, v in (("trace_p", trace_p), ("residual_norm", residual_norm)):
         if not math.isfinite(v):
@@ -203,9 +209,9 @@ def msg_to_estimate(msg: Float64MultiArray) -> Estimate:
         raise WireError(f"data (stamp_ns): {stamp} is not a non-negative integer")
     return Estimate(
         stamp_ns=int(stamp),
-        F=theta[:, :p].copy(),
-        G=theta[:, p : c - 1].copy(),
-        w=theta[:, c - 1].copy(),
+        F=theta_t[:, :p].copy(),
+        G=theta_t[:, p : c - 1].copy(),
+        w=theta_t[:, c - 1].copy(),
         trace_p=float(trace_p),
         residual_norm=float(residual_norm),
     )

@@ -22,8 +22,10 @@ from apc_core.wire.stamps import NS_PER_S, duration_to_ns, split_ns, stamp_to_ns
 
 
 @dataclass(frozen=True, eq=False)  # arrays: compare fields with numpy
-class Setpoint:
-    """The planned set point of one sample, as carried by :data:`SETPOINT`.
+class SetpointStamped:
+    """The planned set point of one sample as :data:`SETPOINT` carries it, stamped with its
+    sample time (like ``PoseStamped`` to ``Pose``): the wire form of the feedforward's
+    ``apc_feedforward.nominal.Setpoint``, which counts samples and seconds instead.
 
     Attributes
     ----------
@@ -98,7 +100,7 @@ def setpoint_to_msg(
 
 def msg_to_setpoint(
     msg: JointTrajectory, names: Sequence[str], *, max_abs: float = DEFAULT_MAX_ABS
-) -> Setpoint:
+) -> SetpointStamped:
     """Read a set point message (see :func:`setpoint_to_msg`), reordered to ``names``.
 
     Raises
@@ -119,11 +121,12 @@ def msg_to_setpoint(
         for f in ("positions", "velocities", "accelerations", "effort")
     ]
     tfs = duration_to_ns(point.time_from_start, "points[0].time_from_start")
-    return Setpoint(stamp, *arrays, time_from_start_ns=tfs)  # type: ignore[arg-type]
+    return SetpointStamped(stamp, *arrays, time_from_start_ns=tfs)  # type: ignore[arg-type]
 
 
-class Waypoints(NamedTuple):
-    """Waypoints of a goal, reordered to the caller's joint order.
+class TrajectoryGoal(NamedTuple):
+    """The waypoints of a trajectory goal (:data:`TRAJECTORY_GOAL`), reordered to the caller's
+    joint order; the feedforward plans a trajectory through them.
 
     Unpacks as ``times_s, positions, velocities, accelerations``.
 
@@ -145,9 +148,9 @@ class Waypoints(NamedTuple):
     accelerations: np.ndarray | None
 
 
-def msg_to_waypoints(
+def msg_to_trajectory_goal(
     msg: JointTrajectory, names: Sequence[str], *, max_abs: float = DEFAULT_MAX_ABS
-) -> Waypoints:
+) -> TrajectoryGoal:
     """Read a trajectory goal into waypoint arrays with columns ordered as ``names``.
 
     Parameters
@@ -163,7 +166,7 @@ def msg_to_waypoints(
 
     Returns
     -------
-    Waypoints
+    TrajectoryGoal
 
     Raises
     ------
@@ -209,4 +212,4 @@ def msg_to_waypoints(
                 if optional[field] is None:
                     optional[field] = np.empty((m, len(names)))
                 optional[field][i] = values  # type: ignore[index]
-    return Waypoints(times, positions, optional["velocities"], optional["accelerations"])
+    return TrajectoryGoal(times, positions, optional["velocities"], optional["accelerations"])
