@@ -8,10 +8,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from apc_core.params import ConfigError
 from apc_core.robot import load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
-from apc_feedback.laws import make_law
+from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import one_step_control
 from apc_plant_sim.scenario import CONFIG_DIR
@@ -252,3 +253,45 @@ def test_a_gap_in_the_samples_skips_the_identification_step(controller_robot):
     np.testing.assert_allclose(out.du, expected, rtol=1e-10)
     out = law.update(4, q, qd, q_d, qd_d, qdd_d, u_n, u_n + out.du)
     assert not out.skipped and law.rls.n_updates == 2 and out.residual is not None
+
+
+def _law_values(**overrides):
+    values = {"period": 0.01, **{p.name: p.default for p in LAW_PARAMS}}
+    values.update(overrides)
+    return values
+
+
+@pytest.mark.parametrize(
+    ("overrides", "name", "words"),
+    [
+        ({"adaptive.r": -1.0}, "adaptive.r", "out of range"),
+        ({"adaptive.q_position": -0.1}, "adaptive.q_position", "out of range"),
+        ({"adaptive.rho": 1.5}, "adaptive.rho", "out of range"),
+        ({"adaptive.horizon": 2.5}, "adaptive.horizon", "must be an integer"),
+        ({"adaptive.forgetting": "bogus"}, "adaptive.forgetting", "bogus"),
+        ({"period": 0.0}, "period", "> 0"),
+        ({"controller": "lqr"}, "controller", "must be one of"),
+        ({"controller": "pd", "gains.kv": -1.0}, "gains.kv", "out of range"),
+    ],
+)
+def test_law_parameters_name_the_bad_parameter(controller_robot, overrides, name, words):
+    with pytest.raises(ConfigError, match=words) as info:
+        LawParameters(_law_values(**overrides), controller_robot)
+    assert str(info.value).startswith(f"parameter '{name}': ")
+
+
+def test_law_parameters_take_run_time_settings_at_the_next_sample_all_or_none(controller_robot):
+    laws = LawParameters(_law_values(controller="computed_torque"), controller_robot)
+    assert isinstance(laws.law, ComputedTorque) and laws.family == "gains."
+    laws.propose({"gains.kp": 400, "use_sim_time": True, "adaptive.rho": 0.5})  # not its own
+    with pytest.raises(ConfigError, match=r"^parameter 'gains\.kv': kv = -1 is out of range"):
+        laws.propose({"gains.kp": 1.0, "gains.kv": -1.0})
+    with pytest.raises(ConfigError, match=r"^parameter 'adaptive\.r': not used by controller"):
+        laws.propose({"gains.kv": 1.0, "adaptive.r": 1.0})
+    assert laws.law.gains == PdGains()  # nothing before the sample
+    assert laws.take() == {"gains.kp": 400}
+    assert laws.law.gains == PdGains(kp=400.0)
+    assert laws.take() == {}
+    none = LawParameters(_law_values(controller="none"), controller_robot)
+    with pytest.raises(ConfigError, match="not used by controller 'none'"):
+        none.propose({"gains.kp": 1.0})

@@ -34,7 +34,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from apc_core.params import ConfigError, Param
-from apc_core.robot import PAPER_GRAVITY_M_S2, Robot, RobotModelError, load_robot
+from apc_core.robot import PAPER_GRAVITY_M_S2, PAPER_PERIOD_S, Robot, RobotModelError, load_robot
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
 from apc_core.wire import sample_index as sample_index  # the nodes take it from here
 
@@ -62,7 +62,7 @@ ROBOT_PARAMS: tuple[Param, ...] = (
     ),
     Param(
         "period",
-        0.010,
+        PAPER_PERIOD_S,
         "sampling period T (s): torques are held for T, states are sampled every T",
         1e-4,
         1.0,

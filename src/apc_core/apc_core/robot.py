@@ -29,6 +29,8 @@ import pinocchio as pin
 PAPER_GRAVITY_M_S2 = 9.8062
 #: The paper's maximum payload, 5 lb, in kg.
 PAPER_MAX_PAYLOAD_KG = 5.0 * 0.45359237
+#: The paper's sampling period T (s), the default of every node and run.
+PAPER_PERIOD_S = 0.010
 _MOVABLE = {"revolute", "prismatic"}
 _ALLOWED = _MOVABLE | {"fixed"}
 

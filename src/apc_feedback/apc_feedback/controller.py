@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_core.params import SettingError, check_settings, setting
+from apc_core.robot import PAPER_PERIOD_S
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
     OneStepControl,
@@ -186,7 +187,7 @@ class AdaptiveConfig:
         control ``~ Ĝ⁻¹`` command the torque limit. 0 (default): always identify (the paper).
     """
 
-    period: float = 0.010
+    period: float = PAPER_PERIOD_S
     q_position: float = setting(
         0.1,
         "Q weight of the position error, Eq. 34 (1/rad^2); settable at run time",

@@ -16,7 +16,6 @@ parameter) and applied from the next sample on. Every other parameter is read-on
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 from typing import Any
 
@@ -40,11 +39,10 @@ from apc_core.nodeutil import (
     robot_from_params,
     run_node,
 )
-from apc_core.params import ConfigError, Param, declare, params_from, subset
+from apc_core.params import ConfigError, Param, declare
 from apc_core.robot import with_inertia_error
-from apc_feedback.baselines import PdGains
-from apc_feedback.controller import AdaptiveConfig, FeedbackError
-from apc_feedback.laws import CONTROLLER_KINDS, LAWS, make_law
+from apc_feedback.controller import FeedbackError
+from apc_feedback.laws import LAW_PARAMS, LawParameters
 from apc_feedback.sampling import (
     Decision,
     GridSampler,
@@ -61,18 +59,8 @@ PARAMS: tuple[Param, ...] = (
         [],
         "relative error of the controller's link inertia tensors, one per joint; empty = none",
     ),
-    Param("controller", "adaptive", f"feedback law: one of {', '.join(CONTROLLER_KINDS)}"),
-    *params_from(AdaptiveConfig, LAWS["adaptive"].family),
-    *params_from(PdGains, LAWS["pd"].family),
+    *LAW_PARAMS,
 )
-_NAMES = {p.name for p in PARAMS}
-_RUNTIME = {p.name for p in PARAMS if not p.read_only}
-
-
-def _parameter(family: str, exc: FeedbackError) -> str:
-    """The parameter a law's settings error is about (the controller when no field is named)."""
-    name = f"{family}{exc.field}"
-    return name if name in _NAMES else (exc.field if exc.field in _NAMES else "controller")
 
 
 class FeedbackNode(Node):
@@ -90,16 +78,8 @@ class FeedbackNode(Node):
         error = values["inertia_error"] or [0.0] * n
         if len(error) != n:
             raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
-        self.kind = values["controller"]
-        kind = LAWS.get(self.kind)
-        self.family = kind.family if kind is not None else ""
-        settings = subset(values, self.family) if self.family else None
-        try:
-            self.law = make_law(
-                self.kind, with_inertia_error(robot, error), values["period"], settings
-            )
-        except FeedbackError as exc:
-            raise ConfigError(f"parameter '{_parameter(self.family, exc)}': {exc}") from None
+        self.laws = LawParameters(values, with_inertia_error(robot, error))
+        self.law, self.kind = self.laws.law, self.laws.kind
         self.period_ns = wire.seconds_to_ns(values["period"])
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self.diagnostics.set("controller", self.kind)
@@ -109,8 +89,6 @@ class FeedbackNode(Node):
         self._answer: tuple[int, JointState, Float64MultiArray | None] | None = None
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
-        #: Run-time settings set since the last sample, by parameter name (checked when set).
-        self._updates: dict[str, Any] = {}
 
         self.torque_pub = self.create_publisher(JointState, wire.FEEDBACK_TORQUE, qos)
         self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, qos)
@@ -125,38 +103,13 @@ class FeedbackNode(Node):
         # by rclpy before it gets here, with "Trying to set a read-only parameter: <name>.").
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-    # -- run-time settings ----------------------------------------------------------------------
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Check new settings with the law's settings dataclass; they are applied at the next
-        sample (all or none)."""
-        updates = dict(self._updates)
-        for parameter in parameters:
-            if parameter.name not in _RUNTIME:
-                continue  # e.g. use_sim_time: not ours to judge
-            if not (self.family and parameter.name.startswith(self.family)):
-                return SetParametersResult(
-                    successful=False,
-                    reason=f"parameter '{parameter.name}': not used by controller '{self.kind}'",
-                )
-            updates[parameter.name] = parameter.value
+        """New run-time settings: checked now, taken at the next sample (all or none)."""
         try:
-            self._settings(updates)
-        except FeedbackError as exc:
-            reason = f"parameter '{_parameter(self.family, exc)}': {exc}"
-            return SetParametersResult(successful=False, reason=reason)
-        self._updates = updates
+            self.laws.propose({p.name: p.value for p in parameters})
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
-
-    def _settings(self, updates: dict[str, Any]) -> Any:
-        """The law's settings with ``updates`` (parameter names), validated by its dataclass."""
-        return dataclasses.replace(self.law.settings, **subset(updates, self.family))
-
-    def _apply_updates(self, k: int) -> None:
-        updates, self._updates = self._updates, {}
-        self.law.reconfigure(self._settings(updates))
-        self.diagnostics.count("parameter_updates")
-        changes = ", ".join(f"{name} = {value:g}" for name, value in sorted(updates.items()))
-        self.get_logger().info(f"sample {k}: applying {changes}")
 
     # -- samples --------------------------------------------------------------------------------
     def _on_joint_state(self, msg: JointState) -> None:
@@ -201,8 +154,11 @@ class FeedbackNode(Node):
 
     def _step(self, step: Step) -> None:
         stamp = step.stamp_ns
-        if self._updates:
-            self._apply_updates(step.k)
+        changes = self.laws.take()
+        if changes:
+            self.diagnostics.count("parameter_updates")
+            listed = ", ".join(f"{name} = {value:g}" for name, value in sorted(changes.items()))
+            self.get_logger().info(f"sample {step.k}: applying {listed}")
         with Stopwatch(self.diagnostics, "compute"):
             try:
                 out = self.law.update(step.k, *step.law_inputs())

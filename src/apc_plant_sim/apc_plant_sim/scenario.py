@@ -94,8 +94,8 @@ class Scenario:
     segment_times: tuple[float, ...] = (0.2, 0.6, 0.2)
     lift_off: float = 0.1
     set_down: float = 0.9
-    period: float = 0.010
-    step: float = 0.0025
+    period: float = PlantConfig.period
+    step: float = PlantConfig.step
     hold_s: float = 0.5
     gravity: float = PAPER_GRAVITY_M_S2
     lock_joints: tuple[str, ...] = field(default_factory=tuple)
