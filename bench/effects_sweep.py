@@ -8,8 +8,8 @@ count per period of noise, a one-period command delay). Laws: computed torque (E
 Kp = 100, Kv = 20), the JTC-style PID (tuned at 10 rad/s), the adaptive law with the paper's
 settings, the recommended preset, and the recommended preset with the law option that answers
 the effect (``FIXES``: the command delay in the model, the two-period input of a differenced
-velocity, no identification while a joint sticks; for "all", all of them and a weight on the
-inputs under way).
+velocity, no identification while a joint sticks; for "all", all three: the "physical"
+preset).
 
 Per effect, case and law: maximum error over the move and final error at its end, per joint
 (deg), and whether each adaptive column beats both computed torque and PID on every joint in
@@ -31,6 +31,7 @@ from apc_plant_sim.effects import EFFECT_FIELDS, puma560_effects, single_effect
 from apc_plant_sim.scenario import (
     paper_scenario,
     paper_settings,
+    physical_settings,
     recommended_settings,
     run_offline,
 )
@@ -46,13 +47,12 @@ LAWS = {
 }
 BASELINES = ("computed_torque", "pid")
 # The AdaptiveConfig options added to the recommended preset for each effect (none: nothing to
-# answer). Chosen one effect at a time; "all" combines them (r_memory from a sweep of 0, 3e-5,
-# 1e-4, 3e-4 on delay + velocity_difference).
+# answer), chosen one effect at a time; "all" combines them.
 FIXES = {
     "friction": {"identify_min_speed": 0.05},
     "velocity_difference": {"input_periods": 2},
     "delay": {"command_delay": 1},
-    "all": {"command_delay": 1, "input_periods": 2, "identify_min_speed": 0.05, "r_memory": 3e-5},
+    "all": {k: v for k, v in physical_settings().items() if k not in recommended_settings()},
 }
 
 

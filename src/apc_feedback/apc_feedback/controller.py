@@ -174,12 +174,6 @@ class AdaptiveConfig:
         a double integrator carries half of each of the last two periods' inputs); the
         regressor's input is then ``δu(k) + δu(k-1)`` and the control plans over
         ``(δx(k), δu(k-1))``. 1 (default): the paper's law.
-    r_memory : float
-        With ``command_delay`` or ``input_periods``, the cost weight of the inputs already
-        under way (the memory states): the input sum ``δu(k) + δu(k-1)`` has a zero at
-        ``z = -1``, so an input alternating from period to period moves no modelled state, and
-        with ``R`` tiny the planned control can let it grow; weighing it bounds it. 0
-        (default): unweighted.
     identify_min_speed : float
         No identification step while a joint's measured speed is below this at ``k-1`` or
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
@@ -249,9 +243,6 @@ class AdaptiveConfig:
     )
     input_periods: int = setting(
         1, "periods whose input reaches the next state: 2 for a differenced velocity", 1, 2
-    )
-    r_memory: float = setting(
-        0.0, "cost weight of the inputs under way (command_delay, input_periods)", 0.0, 1e12
     )
     identify_min_speed: float = setting(
         0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3
@@ -329,6 +320,8 @@ class AdaptiveFeedback(FeedbackLaw):
     def __init__(self, model: pin.Model, config: AdaptiveConfig) -> None:
         super().__init__(model.nv)
         self.model = model
+        limit = np.asarray(model.effortLimit, dtype=float)
+        self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
         self.rls = Rls(model.nv, config.rls_config(model.nv))
         self._set_weights(config)
         self.reset()
@@ -452,7 +445,9 @@ class AdaptiveFeedback(FeedbackLaw):
                 self._command_prev = u_n.copy()
             du = self._control_with_memory(dx, u_n)
             self._command_before = self._command_prev
-            self._command_prev = u_n + du
+            # What the arm will apply: the command within the model's effort limits (a drive
+            # clips it; an unclipped memory makes the plan expect torque that never comes).
+            self._command_prev = np.clip(u_n + du, -self._effort_limit, self._effort_limit)
             self._u_n_known = True
         else:
             du = self._control(dx)
@@ -552,7 +547,7 @@ class AdaptiveFeedback(FeedbackLaw):
                 F[p + i * n : p + (i + 1) * n, p + (i - 1) * n : p + i * n] = np.eye(n)
         w = np.concatenate([w0, np.zeros(L * n)])
         x = np.concatenate([dx, *memory])
-        q_diagonal = np.concatenate([self.Q.diagonal(), np.full(L * n, config.r_memory)])
+        q_diagonal = np.concatenate([self.Q.diagonal(), np.zeros(L * n)])
         if config.q_integral > 0.0:
             limit = config.integral_limit
             self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)

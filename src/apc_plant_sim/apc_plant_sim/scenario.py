@@ -250,7 +250,29 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     }
 
 
-PRESETS = {"paper": paper_settings, "recommended": recommended_settings}
+def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """The recommended preset for an arm behind a drive: a command applied one period late, the
+    velocity differenced from encoder positions, joint friction (``bench/effects_sweep.py``).
+
+    The identified model carries the delay (``command_delay``) and the two-period input of a
+    differenced velocity (``input_periods``), and no identification step is taken while a joint
+    sticks (``identify_min_speed``). Measured on the 3-joint PUMA 560 with all of
+    :func:`apc_plant_sim.effects.puma560_effects` on, it beats computed torque and PID on every
+    joint of cases (a)-(c) and the pickup; it is not robust to other combinations (README).
+    """
+    return {
+        **recommended_settings(alpha),
+        "command_delay": 1,
+        "input_periods": 2,
+        "identify_min_speed": 0.05,
+    }
+
+
+PRESETS = {
+    "paper": paper_settings,
+    "recommended": recommended_settings,
+    "physical": physical_settings,
+}
 
 
 def joint_sign_to_paper(n: int) -> np.ndarray:
