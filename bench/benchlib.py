@@ -335,7 +335,7 @@ BUCKETS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("plant dynamics", ("apc_plant_sim/plant.py", "pinocchio")),
     ("feedback law", ("apc_feedback/rls.py", "apc_feedback/optimal.py", "controller.py")),
     ("feedforward (trajectory, RNEA)", ("apc_feedforward/trajectory.py", "nominal.py")),
-    ("recorder (MCAP)", ("recorder.py", "apc_core/bag.py", "/mcap/", "zstandard")),
+    ("recorder (MCAP)", ("recorder.py", "apc_core/bag/", "/mcap/", "zstandard")),
     (
         "messages (wire, msg classes)",
         ("apc_core/wire/", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),

@@ -42,7 +42,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from apc_core import wire
-from apc_core.bag import BagTruncatedWarning, bag_info, read_messages, recover
+from apc_core.bag import BagTruncatedWarning, bag_info, read_messages
+from apc_core.bag.recovery import main as bag_recover
 from apc_plant_sim.experiment import RunSpec, stop_processes
 from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
 
@@ -676,7 +677,7 @@ def test_killed_recorder_keeps_an_exact_prefix_of_the_run(tmp_path):
     assert lost_js <= (interval_s + 0.1) / T
 
     fixed = tmp_path / "recovered.mcap"
-    assert recover(bag, fixed) == len(recorded)
+    assert bag_recover([str(bag), str(fixed)]) == 0
     info = bag_info(fixed)
     assert info["complete"] is True and info["message_count"] == len(recorded)
     with AnyReader([fixed]) as reader:

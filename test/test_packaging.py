@@ -29,7 +29,7 @@ VENV = Path(sys.prefix)
 VENV_BIN = VENV / "bin"
 
 EXECUTABLES: dict[str, tuple[str, ...]] = {
-    "apc_core": ("recorder", "player"),
+    "apc_core": ("recorder", "player", "bag_recover"),
     "apc_feedforward": ("feedforward_node",),
     "apc_feedback": ("feedback_node",),
     "apc_plant_sim": ("plant_node", "robot_sim", "arm", "experiment", "analyze", "apc_params"),

@@ -47,6 +47,7 @@ setup(
         "console_scripts": [
             "recorder = apc_core.recorder:main",
             "player = apc_core.player:main",
+            "bag_recover = apc_core.bag.recovery:main",
         ],
     },
 )
