@@ -46,6 +46,7 @@ from apc_core.params import ConfigError, Param, declare
 from apc_core.robot import with_inertia_error
 from apc_feedforward.goals import GoalQueue, Lookahead, Sampled
 from apc_feedforward.nominal import Setpoint
+from apc_feedforward.trajectory import LIFT_OFF, SEGMENT_TIMES, SET_DOWN
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
@@ -61,9 +62,9 @@ PARAMS: tuple[Param, ...] = (
         "first move: 4-3-4 from the first measured position to this goal (deg, URDF angles); "
         "empty = hold the first measured position until a goal arrives",
     ),
-    Param("move.segment_times", [0.2, 0.6, 0.2], "4-3-4 segment durations (s)"),
-    Param("move.lift_off", 0.1, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
-    Param("move.set_down", 0.9, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
+    Param("move.segment_times", list(SEGMENT_TIMES), "4-3-4 segment durations (s)"),
+    Param("move.lift_off", LIFT_OFF, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
+    Param("move.set_down", SET_DOWN, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
     Param(
         "lookahead",
         1,

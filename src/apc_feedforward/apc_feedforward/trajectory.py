@@ -44,6 +44,11 @@ FloatArray = NDArray[np.float64]
 # Highest polynomial degree used by any planner here; every segment is stored padded to it so
 # that all segments can be evaluated in one vectorised Horner pass.
 _MAX_DEGREE = 5
+#: The paper's 4-3-4 shape, the default of every 4-3-4 move: lift-off, travel and set-down
+#: durations (s) of its 1 s move, and the lift-off and set-down points as fractions of the travel.
+SEGMENT_TIMES = (0.2, 0.6, 0.2)
+LIFT_OFF = 0.1
+SET_DOWN = 0.9
 
 
 class TrajectoryError(ValueError):
@@ -484,9 +489,9 @@ class FourThreeFour(PiecewisePolynomial):
         self,
         q0: ArrayLike,
         qf: ArrayLike,
-        segment_times: Sequence[float] = (0.2, 0.6, 0.2),
-        lift_off: float | ArrayLike = 0.1,
-        set_down: float | ArrayLike = 0.9,
+        segment_times: Sequence[float] = SEGMENT_TIMES,
+        lift_off: float | ArrayLike = LIFT_OFF,
+        set_down: float | ArrayLike = SET_DOWN,
     ) -> None:
         q0_v = _as_vector("q0", q0)
         n = q0_v.size

@@ -52,7 +52,7 @@ from apc_core.nodeutil import (
     robot_from_params,
     run_node,
 )
-from apc_core.params import ConfigError, Param, declare
+from apc_core.params import ConfigError, Param, declare, params_from
 from apc_core.robot import Payload, RobotModelError, with_payload
 from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
@@ -61,7 +61,7 @@ MODES = ("realtime", "lockstep")
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
-    Param("step", 0.0025, "RK4 integration step h (s); must divide period", 1e-6, 1.0),
+    *params_from(PlantConfig, ""),
     Param("mode", "realtime", "'realtime' (wall timer, newest torques) or 'lockstep'"),
     Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
     Param("payload.frame", "", "frame carrying the payload; empty = body of the last joint"),
@@ -74,13 +74,6 @@ PARAMS: tuple[Param, ...] = (
         1e9,
     ),
     Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
-    Param("enforce_torque_limits", True, "clip |tau| to the URDF effort limits"),
-    Param(
-        "forward_dynamics",
-        "aba",
-        "how q'' is computed: 'aba' (articulated body, fast) or 'crba' (D(q) and solve); "
-        "same dynamics",
-    ),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
     Param(
         "wait_for_subscribers",
@@ -169,7 +162,7 @@ class PlantNode(Node):
                 forward_dynamics=values["forward_dynamics"],
             )
         except PlantError as exc:
-            raise ConfigError(f"parameter '{str(exc).split()[0]}': {exc}") from None
+            raise ConfigError(f"parameter '{exc.field}': {exc}") from None
         q0 = values["q_initial_deg"] or [0.0] * n
         if len(q0) != n:
             raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")

@@ -29,11 +29,13 @@ from typing import Any, Literal
 import numpy as np
 import pinocchio as pin
 
+from apc_core.params import SettingError, check_settings, setting
 from apc_core.robot import Robot
 
 
-class PlantError(ValueError):
-    """Bad plant configuration or input; the message names the parameter."""
+class PlantError(SettingError):
+    """Bad plant configuration or input; the message names the parameter (and ``field`` the
+    setting at fault)."""
 
 
 @dataclass(frozen=True)
@@ -53,23 +55,29 @@ class PlantConfig:
     """
 
     period: float = 0.010
-    step: float = 0.0025
-    enforce_torque_limits: bool = True
-    forward_dynamics: Literal["aba", "crba"] = "aba"
+    step: float = setting(0.0025, "RK4 integration step h (s); must divide period", 1e-6, 1.0)
+    enforce_torque_limits: bool = setting(True, "clip |tau| to the URDF effort limits")
+    forward_dynamics: Literal["aba", "crba"] = setting(
+        "aba",
+        "how q'' is computed: 'aba' (articulated body, fast) or 'crba' (D(q) and solve); "
+        "same dynamics",
+    )
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.period) and self.period > 0.0):
-            raise PlantError(f"period must be > 0 s, got {self.period}")
-        if not (np.isfinite(self.step) and self.step > 0.0):
-            raise PlantError(f"step must be > 0 s, got {self.step}")
+            raise PlantError(f"period must be > 0 s, got {self.period}", field="period")
+        check_settings(self, PlantError)
         ratio = self.period / self.step
         if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
             raise PlantError(
-                f"step ({self.step} s) must divide period ({self.period} s) a whole number of times"
+                f"step ({self.step} s) must divide period ({self.period} s) a whole number "
+                "of times",
+                field="step",
             )
         if self.forward_dynamics not in ("aba", "crba"):
             raise PlantError(
-                f"forward_dynamics must be 'aba' or 'crba', got {self.forward_dynamics!r}"
+                f"forward_dynamics must be 'aba' or 'crba', got {self.forward_dynamics!r}",
+                field="forward_dynamics",
             )
 
     @property

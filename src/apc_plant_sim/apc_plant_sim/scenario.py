@@ -34,7 +34,7 @@ from apc_core.robot import (
 )
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
-from apc_feedforward.trajectory import FourThreeFour
+from apc_feedforward.trajectory import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour
 from apc_plant_sim.effects import ArmEffects, PhysicalArm
 from apc_plant_sim.offline import RunResult, run_closed_loop
 from apc_plant_sim.plant import Plant, PlantConfig
@@ -91,9 +91,9 @@ class Scenario:
     inertia_error: tuple[float, ...] = (0.1, -0.1, 0.1)
     q_start_deg: tuple[float, ...] = (0.0, -45.0, -45.0)
     q_goal_deg: tuple[float, ...] = (90.0, 45.0, -135.0)
-    segment_times: tuple[float, ...] = (0.2, 0.6, 0.2)
-    lift_off: float = 0.1
-    set_down: float = 0.9
+    segment_times: tuple[float, ...] = SEGMENT_TIMES
+    lift_off: float = LIFT_OFF
+    set_down: float = SET_DOWN
     period: float = PlantConfig.period
     step: float = PlantConfig.step
     hold_s: float = 0.5
