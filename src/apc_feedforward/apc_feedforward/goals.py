@@ -13,7 +13,7 @@ counters and log lines.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
@@ -21,8 +21,13 @@ import numpy as np
 import pinocchio as pin
 
 from apc_core import wire
+from apc_core.params import ConfigError, Param
+from apc_core.robot import Robot
 from apc_feedforward.nominal import Feedforward, Setpoint
 from apc_feedforward.trajectory import (
+    LIFT_OFF,
+    SEGMENT_TIMES,
+    SET_DOWN,
     FourThreeFour,
     Quintic,
     Trajectory,
@@ -36,6 +41,19 @@ MAX_QUEUED_GOALS = 100
 PLAN_CHECK_SAMPLES = 10_000
 
 R = TypeVar("R")
+
+#: The feedforward node's parameters of the first move.
+MOVE_PARAMS: tuple[Param, ...] = (
+    Param(
+        "move.goal_deg",
+        [],
+        "first move: 4-3-4 from the first measured position to this goal (deg, URDF angles); "
+        "empty = hold the first measured position until a goal arrives",
+    ),
+    Param("move.segment_times", list(SEGMENT_TIMES), "4-3-4 segment durations (s)"),
+    Param("move.lift_off", LIFT_OFF, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
+    Param("move.set_down", SET_DOWN, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
+)
 
 
 @dataclass
@@ -105,6 +123,30 @@ class GoalQueue:
         self.feedforward: Feedforward | None = None
         self.queued: list[wire.TrajectoryGoal] = []
         self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
+
+    @classmethod
+    def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> GoalQueue:
+        """Built from the node's parameter values (:data:`MOVE_PARAMS` and ``period``) for the
+        controller's ``robot``; a bad value raises ConfigError naming it."""
+        n = robot.n_joints
+        goal = values["move.goal_deg"]
+        if goal and len(goal) != n:
+            raise ConfigError(f"parameter 'move.goal_deg': needs {n} values, got {len(goal)}")
+        segments = values["move.segment_times"]
+        if len(segments) != 3 or min(segments) <= 0.0:
+            raise ConfigError("parameter 'move.segment_times': needs 3 positive durations (s)")
+        return cls(
+            robot.model,
+            values["period"],
+            robot.joint_names,
+            robot.position_limits,
+            first_goal=np.deg2rad(goal) if goal else None,
+            move=dict(
+                segment_times=tuple(segments),
+                lift_off=values["move.lift_off"],
+                set_down=values["move.set_down"],
+            ),
+        )
 
     # -- goals ----------------------------------------------------------------------------------
     def add(self, goal: wire.TrajectoryGoal) -> None:

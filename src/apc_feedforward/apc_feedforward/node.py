@@ -24,7 +24,6 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
@@ -44,9 +43,8 @@ from apc_core.nodeutil import (
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_core.robot import with_inertia_error
-from apc_feedforward.goals import GoalQueue, Lookahead, Sampled
+from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled
 from apc_feedforward.nominal import Setpoint
-from apc_feedforward.trajectory import LIFT_OFF, SEGMENT_TIMES, SET_DOWN
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
@@ -56,15 +54,7 @@ PARAMS: tuple[Param, ...] = (
         "relative error of the controller's link inertia tensors, one per joint (the paper's "
         "simulation study: [0.1, -0.1, 0.1]); empty = the URDF as is",
     ),
-    Param(
-        "move.goal_deg",
-        [],
-        "first move: 4-3-4 from the first measured position to this goal (deg, URDF angles); "
-        "empty = hold the first measured position until a goal arrives",
-    ),
-    Param("move.segment_times", list(SEGMENT_TIMES), "4-3-4 segment durations (s)"),
-    Param("move.lift_off", LIFT_OFF, "4-3-4 lift-off point, fraction of travel", 0.0, 1.0),
-    Param("move.set_down", SET_DOWN, "4-3-4 set-down point, fraction of travel", 0.0, 1.0),
+    *MOVE_PARAMS,
     Param(
         "lookahead",
         1,
@@ -100,26 +90,9 @@ class FeedforwardNode(Node):
         if len(error) != n:
             raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
         self.controller_robot = with_inertia_error(robot, error)
-        goal = values["move.goal_deg"]
-        if goal and len(goal) != n:
-            raise ConfigError(f"parameter 'move.goal_deg': needs {n} values, got {len(goal)}")
-        segments = values["move.segment_times"]
-        if len(segments) != 3 or min(segments) <= 0.0:
-            raise ConfigError("parameter 'move.segment_times': needs 3 positive durations (s)")
         self.period = values["period"]
         self.period_ns = wire.seconds_to_ns(self.period)
-        self.goals = GoalQueue(
-            self.controller_robot.model,
-            self.period,
-            self.joint_names,
-            self.controller_robot.position_limits,
-            first_goal=np.deg2rad(goal) if goal else None,
-            move=dict(
-                segment_times=tuple(segments),
-                lift_off=values["move.lift_off"],
-                set_down=values["move.set_down"],
-            ),
-        )
+        self.goals = GoalQueue.from_params(self.controller_robot, values)
         self.lookahead = Lookahead(values["lookahead"])
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self._setpoint_msg = JointTrajectory()

@@ -52,28 +52,17 @@ from apc_core.nodeutil import (
     robot_from_params,
     run_node,
 )
-from apc_core.params import ConfigError, Param, declare, params_from
-from apc_core.robot import Payload, RobotModelError, with_payload
+from apc_core.params import ConfigError, Param, declare
 from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
-from apc_plant_sim.plant import Plant, PlantConfig, PlantError
+from apc_plant_sim.plant import PlantError
+from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
 
 MODES = ("realtime", "lockstep")
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
-    *params_from(PlantConfig, ""),
+    *ARM_PARAMS,
     Param("mode", "realtime", "'realtime' (wall timer, newest torques) or 'lockstep'"),
-    Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
-    Param("payload.frame", "", "frame carrying the payload; empty = body of the last joint"),
-    Param("payload.com_m", [0.0, 0.0, 0.0], "payload centre of mass in payload.frame (m)"),
-    Param(
-        "payload.at_s",
-        0.0,
-        "time (s, sample time) the payload appears, picked up mid-motion; 0 = from the start",
-        0.0,
-        1e9,
-    ),
-    Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
     Param(
         "wait_for_subscribers",
@@ -140,42 +129,9 @@ class PlantNode(Node):
             raise ConfigError(
                 f"parameter 'mode': must be one of {', '.join(MODES)}, got {self.mode!r}"
             )
-        try:
-            payload = Payload(
-                mass_kg=values["payload.mass_kg"],
-                com_m=tuple(values["payload.com_m"]),
-                frame=values["payload.frame"] or None,
-            )
-        except RobotModelError as exc:  # "payload mass_kg must be ...", "payload com_m ..."
-            raise ConfigError(f"parameter 'payload.{str(exc).split()[1]}': {exc}") from None
-        if payload.frame is not None and not robot.model.existFrame(payload.frame):
-            raise ConfigError(f"parameter 'payload.frame': no frame '{payload.frame}' in the URDF")
-        try:
-            plant_robot = with_payload(robot, payload)
-        except RobotModelError as exc:
-            raise ConfigError(f"parameter 'payload.frame': {exc}") from None
-        try:
-            config = PlantConfig(
-                period=values["period"],
-                step=values["step"],
-                enforce_torque_limits=values["enforce_torque_limits"],
-                forward_dynamics=values["forward_dynamics"],
-            )
-        except PlantError as exc:
-            raise ConfigError(f"parameter '{exc.field}': {exc}") from None
-        q0 = values["q_initial_deg"] or [0.0] * n
-        if len(q0) != n:
-            raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
-        # A payload picked up at payload.at_s: the arm starts without it.
-        self._pickup_k = (
-            round(values["payload.at_s"] / config.period)
-            if payload.mass_kg > 0.0 and values["payload.at_s"] > 0.0
-            else 0
-        )
-        self._loaded_robot = plant_robot
-        initial = robot if self._pickup_k else plant_robot
-        self.plant = Plant(initial, config, np.deg2rad(q0))
-        self.period_ns = wire.seconds_to_ns(config.period)
+        self.arm = SimulatedArm.from_params(robot, values)
+        self.plant = self.arm.plant
+        self.period_ns = wire.seconds_to_ns(self.plant.config.period)
         self.n_samples = values["n_samples"]
         self._values = values
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
@@ -227,7 +183,7 @@ class PlantNode(Node):
             self._timer = self.create_timer(0.01, tick, clock=self._wall)
         else:
             tick = guarded(self, diag, "realtime_tick", self._realtime_tick)
-            self._timer = self.create_timer(config.period, tick, clock=self._wall)
+            self._timer = self.create_timer(self.plant.config.period, tick, clock=self._wall)
 
     # -- wire -----------------------------------------------------------------------------------
     @property
@@ -357,8 +313,7 @@ class PlantNode(Node):
         self._publish_state()
 
     def _step(self, tau: np.ndarray) -> None:
-        if self._pickup_k and self.k == self._pickup_k:
-            self.plant.set_robot(self._loaded_robot)
+        if self.arm.pick_up():
             self.get_logger().info(f"sample {self.k}: payload picked up")
         with Stopwatch(self.diagnostics, "integrate"):
             try:
