@@ -16,6 +16,8 @@ import rclpy
 from rclpy.parameter import Parameter
 
 from apc_core import wire
+from apc_core.nodeutil import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
+from apc_core.params import ConfigError
 from apc_feedback.node import FeedbackNode
 from apc_plant_sim.experiment import RunSpec
 from apc_plant_sim.scenario import paper_scenario
@@ -180,3 +182,14 @@ def test_run_time_settings_apply_at_the_next_sample_all_or_none(node_of):
     assert (fb.law.gains.kp, fb.law.gains.kv) == (200.0, 20.0)  # kv of the refused set: no
     assert isinstance(fb.law.gains.kp, float)
     assert count(fb, "parameter_updates") == 1
+
+
+@pytest.mark.parametrize(
+    ("error", "words"), [([0.1], "needs 3 values"), ([-1.0, 0.0, 0.0], "> -1")]
+)
+def test_the_controllers_robot_names_a_bad_inertia_error(error, words):
+    values = {p.name: p.default for p in CONTROLLER_ROBOT_PARAMS}
+    assert controller_robot_from_params(values).n_joints == 3  # empty: the URDF as is
+    with pytest.raises(ConfigError, match=words) as info:
+        controller_robot_from_params({**values, "inertia_error": error})
+    assert str(info.value).startswith("parameter 'inertia_error': ")

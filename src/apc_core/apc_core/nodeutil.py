@@ -34,7 +34,14 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from apc_core.params import ConfigError, Param
-from apc_core.robot import PAPER_GRAVITY_M_S2, PAPER_PERIOD_S, Robot, RobotModelError, load_robot
+from apc_core.robot import (
+    PAPER_GRAVITY_M_S2,
+    PAPER_PERIOD_S,
+    Robot,
+    RobotModelError,
+    load_robot,
+    with_inertia_error,
+)
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
 from apc_core.wire import sample_index as sample_index  # the nodes take it from here
 
@@ -66,6 +73,18 @@ ROBOT_PARAMS: tuple[Param, ...] = (
         "sampling period T (s): torques are held for T, states are sampled every T",
         1e-4,
         1.0,
+    ),
+)
+
+
+#: The controllers' arm: the robot, and the error of their model of it (in simulation).
+CONTROLLER_ROBOT_PARAMS: tuple[Param, ...] = (
+    *ROBOT_PARAMS,
+    Param(
+        "inertia_error",
+        [],
+        "relative error of the controller's link inertia tensors, one per joint (the paper's "
+        "simulation study: [0.1, -0.1, 0.1]); empty = the URDF as is",
     ),
 )
 
@@ -112,6 +131,19 @@ def robot_from_params(values: dict[str, Any]) -> Robot:
     except RobotModelError as exc:
         param = "lock_joints" if str(exc).startswith("lock_joints") else source_param
         raise ConfigError(f"parameter '{param}': {exc}") from None
+
+
+def controller_robot_from_params(values: dict[str, Any]) -> Robot:
+    """The controllers' model of the arm named by :data:`CONTROLLER_ROBOT_PARAMS` values: the
+    robot with ``inertia_error``; errors name the parameter."""
+    robot = robot_from_params(values)
+    error = values["inertia_error"]
+    if not error:
+        return robot
+    try:
+        return with_inertia_error(robot, error)
+    except RobotModelError as exc:
+        raise ConfigError(f"parameter 'inertia_error': {exc}") from None
 
 
 class Diagnostics:

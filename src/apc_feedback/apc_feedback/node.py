@@ -1,17 +1,16 @@
 """``feedback_node``: perturbation torques from the joint-state error (Eqs. 29-35, 36).
 
-For each sample ``k`` it waits until it holds both ``joint_states`` and ``feedforward/setpoint``
-stamped ``kT`` (in either order), runs its feedback law once, and publishes ``du(k)`` on
-``feedback/torque`` (stamped ``kT``) and, for the adaptive law, the identified ``[F̂ Ĝ ŵ]``,
-trace(P) and residual norm on ``feedback/estimate``. What a sample is, and what a duplicate,
-a resend or a stale message is, :mod:`apc_feedback.sampling` decides; a re-sent sample is
-answered with the output already published, so the identifier never sees a sample twice.
+For each sample ``k`` it runs its feedback law once on the ``joint_states`` and the
+``feedforward/setpoint`` stamped ``kT`` (in either order; :mod:`apc_feedback.sampling` decides
+what a sample, a duplicate, a resend or a stale message is) and publishes ``du(k)`` on
+``feedback/torque`` and, for the adaptive law, ``[F̂ Ĝ ŵ]``, trace(P) and the residual norm on
+``feedback/estimate``. A re-sent sample is answered with what was published for it: the
+identifier never sees a sample twice.
 
-The law is the ``controller`` parameter; its settings are a parameter family (``adaptive.``,
-``gains.``) made from the law's settings dataclass, which alone validates them. Those marked
-"settable at run time" (Q, R of the adaptive law, the gains) can be changed while the node runs
-(``ros2 param set``); a value is checked when it is set (refused with a reason naming the
-parameter) and applied from the next sample on. Every other parameter is read-only.
+The law is the ``controller`` parameter, its settings a parameter family (``adaptive.``,
+``gains.``) made from its settings dataclass (:mod:`apc_feedback.laws`). Those "settable at run
+time" can be changed with ``ros2 param set``: checked when set (refused with a reason naming
+the parameter), applied from the next sample on. Every other parameter is read-only.
 """
 
 from __future__ import annotations
@@ -30,17 +29,16 @@ from trajectory_msgs.msg import JointTrajectory
 
 from apc_core import wire
 from apc_core.nodeutil import (
-    ROBOT_PARAMS,
+    CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    controller_robot_from_params,
     guarded,
     reject,
-    robot_from_params,
     run_node,
 )
 from apc_core.params import ConfigError, Param, declare
-from apc_core.robot import with_inertia_error
 from apc_feedback.controller import FeedbackError
 from apc_feedback.laws import LAW_PARAMS, LawParameters
 from apc_feedback.sampling import (
@@ -52,15 +50,7 @@ from apc_feedback.sampling import (
     Verdict,
 )
 
-PARAMS: tuple[Param, ...] = (
-    *ROBOT_PARAMS,
-    Param(
-        "inertia_error",
-        [],
-        "relative error of the controller's link inertia tensors, one per joint; empty = none",
-    ),
-    *LAW_PARAMS,
-)
+PARAMS: tuple[Param, ...] = (*CONTROLLER_ROBOT_PARAMS, *LAW_PARAMS)
 
 
 class FeedbackNode(Node):
@@ -72,13 +62,9 @@ class FeedbackNode(Node):
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
         values = declare(self, PARAMS)
-        robot = robot_from_params(values)
+        robot = controller_robot_from_params(values)
         self.joint_names = robot.joint_names
-        n = robot.n_joints
-        error = values["inertia_error"] or [0.0] * n
-        if len(error) != n:
-            raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
-        self.laws = LawParameters(values, with_inertia_error(robot, error))
+        self.laws = LawParameters(values, robot)
         self.law, self.kind = self.laws.law, self.laws.kind
         self.period_ns = wire.seconds_to_ns(values["period"])
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())

@@ -31,29 +31,22 @@ from trajectory_msgs.msg import JointTrajectory
 
 from apc_core import wire
 from apc_core.nodeutil import (
-    ROBOT_PARAMS,
+    CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    controller_robot_from_params,
     guarded,
     reject,
-    robot_from_params,
     run_node,
     sample_index,
 )
-from apc_core.params import ConfigError, Param, declare
-from apc_core.robot import with_inertia_error
+from apc_core.params import Param, declare
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled
 from apc_feedforward.nominal import Setpoint
 
 PARAMS: tuple[Param, ...] = (
-    *ROBOT_PARAMS,
-    Param(
-        "inertia_error",
-        [],
-        "relative error of the controller's link inertia tensors, one per joint (the paper's "
-        "simulation study: [0.1, -0.1, 0.1]); empty = the URDF as is",
-    ),
+    *CONTROLLER_ROBOT_PARAMS,
     *MOVE_PARAMS,
     Param(
         "lookahead",
@@ -83,13 +76,8 @@ class FeedforwardNode(Node):
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
         values = declare(self, PARAMS)
-        robot = robot_from_params(values)
-        self.joint_names = robot.joint_names
-        n = robot.n_joints
-        error = values["inertia_error"] or [0.0] * n
-        if len(error) != n:
-            raise ConfigError(f"parameter 'inertia_error': needs {n} values, got {len(error)}")
-        self.controller_robot = with_inertia_error(robot, error)
+        self.controller_robot = controller_robot_from_params(values)
+        self.joint_names = self.controller_robot.joint_names
         self.period = values["period"]
         self.period_ns = wire.seconds_to_ns(self.period)
         self.goals = GoalQueue.from_params(self.controller_robot, values)
