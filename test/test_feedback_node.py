@@ -193,3 +193,17 @@ def test_the_controllers_robot_names_a_bad_inertia_error(error, words):
     with pytest.raises(ConfigError, match=words) as info:
         controller_robot_from_params({**values, "inertia_error": error})
     assert str(info.value).startswith("parameter 'inertia_error': ")
+
+
+def test_pid_takes_its_parameter_family(node_of):
+    fb = node_of("pid", **{"pid.bandwidth": 8.0, "pid.i_clamp": [1.0, 2.0, 3.0]})
+    assert fb.law.requested.bandwidth == 8.0 and fb.law.requested.i_clamp == (1.0, 2.0, 3.0)
+    q_d = np.array([0.1, -0.2, 0.3])
+    joint_state(fb, 0, q_d - 0.01)
+    setpoint(fb, 0, q_d)
+    assert len(fb.torque_pub.sent) == 1 and count(fb, "rejected") == 0
+
+
+def test_pid_gains_given_in_part_name_the_missing_one(node_of):
+    with pytest.raises(ConfigError, match=r"^parameter 'pid\.i': pid gains p, i and d"):
+        node_of("pid", **{"pid.p": [1.0, 1.0, 1.0], "pid.d": [1.0, 1.0, 1.0]})

@@ -197,7 +197,7 @@ def params_from(cls: type, prefix: str) -> tuple[Param, ...]:
     return tuple(
         Param(
             f"{prefix}{f.name}",
-            f.default,
+            list(f.default) if isinstance(f.default, tuple) else f.default,
             f.metadata["description"],
             f.metadata["low"],
             f.metadata["high"],

@@ -134,26 +134,34 @@ class PidGains:
         Default ``i_clamp`` as a fraction of the effort limit.
     """
 
-    p: tuple[float, ...] = ()
-    i: tuple[float, ...] = ()
-    d: tuple[float, ...] = ()
-    i_clamp: tuple[float, ...] = ()
-    bandwidth: float = 10.0
-    i_clamp_fraction: float = 0.2
+    p: tuple[float, ...] = setting((), "Kp per joint (N m/rad); empty: p, i, d tuned")
+    i: tuple[float, ...] = setting((), "Ki per joint (N m/(rad s)); empty: tuned")
+    d: tuple[float, ...] = setting((), "Kd per joint (N m s/rad); empty: tuned")
+    i_clamp: tuple[float, ...] = setting(
+        (), "bound on |Ki integral| per joint (N m); empty: i_clamp_fraction of the effort limit"
+    )
+    bandwidth: float = setting(
+        10.0, "tuning rule: all three closed-loop poles at -bandwidth (rad/s)", 1e-3, 1e4
+    )
+    i_clamp_fraction: float = setting(
+        0.2, "default i_clamp as a fraction of each joint's effort limit", 0.0, 100.0
+    )
 
     def __post_init__(self) -> None:
         for name in ("p", "i", "d", "i_clamp"):
             values = tuple(float(v) for v in getattr(self, name))
             if not all(np.isfinite(v) and v >= 0.0 for v in values):
-                raise FeedbackError(f"{name} must be finite and >= 0, got {list(values)}")
+                raise FeedbackError(
+                    f"{name} must be finite and >= 0, got {list(values)}", field=name
+                )
             object.__setattr__(self, name, values)
         given = {name for name in ("p", "i", "d") if getattr(self, name)}
         if given and given != {"p", "i", "d"}:
-            raise FeedbackError("pid gains p, i and d must be given together (or none: tuned)")
-        if not (np.isfinite(self.bandwidth) and self.bandwidth > 0.0):
-            raise FeedbackError(f"bandwidth must be > 0 rad/s, got {self.bandwidth}")
-        if not (np.isfinite(self.i_clamp_fraction) and self.i_clamp_fraction >= 0.0):
-            raise FeedbackError(f"i_clamp_fraction must be >= 0, got {self.i_clamp_fraction}")
+            missing = sorted({"p", "i", "d"} - given)[0]
+            raise FeedbackError(
+                "pid gains p, i and d must be given together (or none: tuned)", field=missing
+            )
+        check_settings(self, FeedbackError)
 
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> PidGains:
