@@ -112,8 +112,8 @@ class Feedforward:
 
         The plan is evaluated :data:`BLOCK` samples at a time (one vectorised
         ``sample_many``) and read from that block while ``k`` is in it: the per-sample cost is
-        then RNEA alone. The same products ``(k - start_k) * period`` and the same row-wise
-        Horner as ``trajectory.sample(t)``, so the set points are the same bits.
+        then RNEA alone. The same products ``(k - start_k) * period``, and the polynomial
+        evaluates each time on its own, as ``trajectory.sample(t)`` does: the same bits.
         """
         t = (k - self.start_k) * self.period
         block = self._block

@@ -3,10 +3,10 @@
 The feedforward component of the adaptive perturbation controller needs the desired joint
 position, velocity and acceleration ``(q_d, q̇_d, q̈_d)`` at every sampling instant ``k*T``; the
 nominal torques ``u_n`` are then computed from them by Newton-Euler.  This module plans those
-set points.  It is pure numpy: no ROS types, no clock, no Pinocchio.  Time is always passed in,
-as in ros2_controllers' ``Trajectory::sample``.
+set points.  It is numpy and scipy: no ROS types, no clock, no Pinocchio.  Time is always passed
+in, as in ros2_controllers' ``Trajectory::sample``.
 
-Three planners are provided, all piecewise polynomials in time:
+Three planners are provided, all piecewise polynomials in time (``scipy.interpolate.PPoly``):
 
 * :class:`FourThreeFour` -- the 4-3-4 joint-interpolated trajectory (Paul; Fu, Gonzalez & Lee,
   *Robotics: Control, Sensing, Vision and Intelligence*, ch. 4).  This is the trajectory of the
@@ -29,6 +29,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import BPoly, PPoly
 
 __all__ = [
     "FourThreeFour",
@@ -41,9 +42,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-# Highest polynomial degree used by any planner here; every segment is stored padded to it so
-# that all segments can be evaluated in one vectorised Horner pass.
-_MAX_DEGREE = 5
 #: The paper's 4-3-4 shape, the default of every 4-3-4 move: lift-off, travel and set-down
 #: durations (s) of its 1 s move, and the lift-off and set-down points as fractions of the travel.
 SEGMENT_TIMES = (0.2, 0.6, 0.2)
@@ -227,70 +225,44 @@ class Trajectory:
 
 
 class PiecewisePolynomial(Trajectory):
-    """Per-joint piecewise polynomial of degree <= 5 in local segment time.
+    """Per-joint piecewise polynomial in time, held at rest outside ``[0, duration)``.
 
-    Segment ``i`` covers ``knot_times[i] <= t < knot_times[i + 1]`` and there
-
-    ``q(t) = sum_k coefficients[i, k] * (t - knot_times[i])**k``.
-
-    The planners below are subclasses; this class can also be used directly.
+    The position is a :class:`scipy.interpolate.PPoly` with the joints on its trailing axis;
+    velocity and acceleration are its derivatives.  Segment ``i`` covers
+    ``knot_times[i] <= t < knot_times[i + 1]``: a time exactly on an interior knot belongs to
+    the segment starting there, as PPoly evaluates.  The planners below are subclasses.
 
     Parameters
     ----------
-    knot_times : array_like, shape (s + 1,)
-        Strictly increasing segment boundaries, s; the first must be 0.
-    coefficients : array_like, shape (s, d + 1, n)
-        Ascending-power coefficients of each segment in local time (s), ``d <= 5``.
+    poly : scipy.interpolate.PPoly
+        Coefficients of shape ``(d + 1, s, n)``, breakpoints strictly increasing from 0, s.
         Units: rad / s**k for power k.
-    q_start, q_end : array_like, shape (n,), optional
-        Held before 0 and from ``duration`` on.  Default: the polynomials evaluated at the
-        ends.  Planners pass their exact boundary positions so the hold is exact.
+    q_start, q_end : array_like, shape (n,)
+        Held before 0 and from ``duration`` on.  Planners pass their exact boundary positions,
+        so the hold is exact.
 
     Raises
     ------
     TrajectoryError
-        On shape mismatch, non-finite values or bad knot times.
+        On a shape mismatch, non-finite values or breakpoints not starting at 0.
     """
 
-    def __init__(
-        self,
-        knot_times: ArrayLike,
-        coefficients: ArrayLike,
-        q_start: ArrayLike | None = None,
-        q_end: ArrayLike | None = None,
-    ) -> None:
-        knots = _as_vector("knot_times", knot_times)
-        if knots.size < 2:
-            raise TrajectoryError("knot_times: need at least two knots (one segment)")
+    def __init__(self, poly: PPoly, q_start: ArrayLike, q_end: ArrayLike) -> None:
+        knots = _as_vector("knot_times", poly.x)
         if knots[0] != 0.0:
             raise TrajectoryError(f"knot_times: must start at 0, got {knots[0]}")
-        if np.any(np.diff(knots) <= 0.0):
-            raise TrajectoryError(f"knot_times: must be strictly increasing, got {knots}")
-        coeffs = _as_float_array("coefficients", coefficients)
-        n_seg = knots.size - 1
-        if coeffs.ndim != 3 or coeffs.shape[0] != n_seg or coeffs.shape[2] == 0:
-            raise TrajectoryError(
-                f"coefficients: must have shape ({n_seg}, d + 1, n), got {coeffs.shape}"
-            )
-        if coeffs.shape[1] > _MAX_DEGREE + 1:
-            raise TrajectoryError(f"coefficients: degree must be <= {_MAX_DEGREE}")
-        n = coeffs.shape[2]
-        padded = np.zeros((n_seg, _MAX_DEGREE + 1, n))
-        padded[:, : coeffs.shape[1], :] = coeffs
-
+        if poly.c.ndim != 3 or poly.c.shape[2] == 0:
+            shape = poly.c.shape
+            raise TrajectoryError(f"coefficients: must have shape (d + 1, s, n), got {shape}")
+        if not np.all(np.isfinite(poly.c)):
+            raise TrajectoryError("coefficients: must be finite")
+        n = poly.c.shape[2]
         self.n_joints = int(n)
         self.duration = float(knots[-1])
         self._knots = _readonly(knots)
-        self._c = _readonly(padded)
-        # Derivative coefficients, precomputed once so sampling is three Horner passes.
-        powers = np.arange(_MAX_DEGREE + 1, dtype=np.float64)[:, None]
-        self._dc = _readonly((padded * powers)[:, 1:, :].copy())
-        self._ddc = _readonly((padded * powers * (powers - 1.0))[:, 2:, :].copy())
-
-        if q_start is None:
-            q_start = padded[0, 0, :]
-        if q_end is None:
-            q_end = self.evaluate_segment(n_seg - 1, self.duration)[0]
+        self._q = poly
+        self._qd = poly.derivative(1)
+        self._qdd = poly.derivative(2)
         self._q_start = _readonly(_as_vector("q_start", q_start, n))
         self._q_end = _readonly(_as_vector("q_end", q_end, n))
 
@@ -300,34 +272,14 @@ class PiecewisePolynomial(Trajectory):
         return self._knots
 
     @property
-    def coefficients(self) -> FloatArray:
-        """Ascending-power local-time coefficients, shape (s, 6, n), padded with zeros."""
-        return self._c
+    def poly(self) -> PPoly:
+        """The position polynomial (not held at the ends), rad; do not modify it."""
+        return self._q
 
     @property
     def n_segments(self) -> int:
         """Number of polynomial segments ``s``."""
-        return int(self._c.shape[0])
-
-    def evaluate_segment(self, segment: int, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Evaluate one segment's polynomial at absolute time ``t`` (s), without clamping.
-
-        Unlike :meth:`sample` this extrapolates outside the segment; it is meant for checking
-        continuity at a knot from both sides.
-
-        Returns
-        -------
-        q, qd, qdd : ndarray, shape (n,)
-            rad, rad/s, rad/s².
-        """
-        if not 0 <= segment < self.n_segments:
-            raise TrajectoryError(f"segment: must be in [0, {self.n_segments}), got {segment}")
-        tau = float(t) - self._knots[segment]
-        return (
-            _horner(self._c[segment], tau),
-            _horner(self._dc[segment], tau),
-            _horner(self._ddc[segment], tau),
-        )
+        return self._knots.size - 1
 
     def sample_many(self, t: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Sample at the times ``t``; see :meth:`Trajectory.sample` for the edge cases.
@@ -350,13 +302,9 @@ class PiecewisePolynomial(Trajectory):
         t_arr = _as_float_array("t", t)
         if t_arr.ndim != 1:
             raise TrajectoryError(f"t: must be a 1-D array, got shape {t_arr.shape}")
-        # side="right": a time exactly on an interior knot belongs to the segment starting there.
-        seg = np.searchsorted(self._knots[1:-1], t_arr, side="right")
-        tau = (t_arr - self._knots[seg])[:, None]
-        q = _horner_batched(self._c[seg], tau)
-        qd = _horner_batched(self._dc[seg], tau)
-        qdd = _horner_batched(self._ddc[seg], tau)
-
+        q = self._q(t_arr)
+        qd = self._qd(t_arr)
+        qdd = self._qdd(t_arr)
         before = t_arr < 0.0
         after = t_arr >= self.duration
         # Hold: outside [0, duration) the set point is the end point at rest, never an
@@ -369,61 +317,11 @@ class PiecewisePolynomial(Trajectory):
         return q, qd, qdd
 
 
-def _horner(c: FloatArray, tau: float) -> FloatArray:
-    """``sum_k c[k] * tau**k`` for ``c`` of shape (d + 1, n)."""
-    out = c[-1].copy()
-    for k in range(c.shape[0] - 2, -1, -1):
-        out = out * tau + c[k]
-    return out
-
-
-def _horner_batched(c: FloatArray, tau: FloatArray) -> FloatArray:
-    """Row-wise Horner: ``c`` of shape (m, d + 1, n), ``tau`` of shape (m, 1) -> (m, n).
-
-    Same operation order as :func:`_horner`, so one time gives the same bits either way.
-    """
-    out = c[:, -1, :].copy()
-    for k in range(c.shape[1] - 2, -1, -1):
-        out = out * tau + c[:, k, :]
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# Quintic building block
-# --------------------------------------------------------------------------------------------
-
-
-def _quintic_coefficients(
-    duration: float,
-    q0: FloatArray,
-    qd0: FloatArray,
-    qdd0: FloatArray,
-    qf: FloatArray,
-    qdf: FloatArray,
-    qddf: FloatArray,
-) -> FloatArray:
-    """Coefficients, shape (6, n), of the quintic meeting the six boundary conditions.
-
-    Solved in normalised time ``u = tau / duration`` (closed form of the 6x6 Hermite system),
-    then rescaled to seconds: ``c_k = a_k / duration**k``.  Working in ``u`` keeps the
-    arithmetic well scaled for both short and long segments.
-    """
-    T = duration
-    h = qf - q0
-    v0, v1 = qd0 * T, qdf * T
-    a0, a1 = qdd0 * T * T, qddf * T * T
-    a = np.stack(
-        [
-            q0,
-            v0,
-            0.5 * a0,
-            10.0 * h - 6.0 * v0 - 4.0 * v1 - 0.5 * (3.0 * a0 - a1),
-            -15.0 * h + 8.0 * v0 + 7.0 * v1 + 0.5 * (3.0 * a0 - 2.0 * a1),
-            6.0 * h - 3.0 * v0 - 3.0 * v1 - 0.5 * (a0 - a1),
-        ]
-    )
-    scale = T ** np.arange(6, dtype=np.float64)
-    return a / scale[:, None]
+def _hermite_quintics(knots: FloatArray, q: FloatArray, qd: FloatArray, qdd: FloatArray) -> PPoly:
+    """Quintic segments meeting position, velocity and acceleration, shape (s + 1, n) each, at
+    every knot: ``BPoly.from_derivatives`` (Bernstein basis) converted to power basis."""
+    conditions = np.stack((q, qd, qdd), axis=1)  # (s + 1, 3, n): each knot's derivatives
+    return PPoly.from_bernstein_basis(BPoly.from_derivatives(knots, conditions))
 
 
 # --------------------------------------------------------------------------------------------
@@ -511,7 +409,9 @@ class FourThreeFour(PiecewisePolynomial):
         t1, t2, t3 = (float(x) for x in times)
         coeffs = self._solve(t1, t2, t3, q0_v, q_lift, q_set, qf_v)
         knots = np.array([0.0, t1, t1 + t2, t1 + t2 + t3])
-        super().__init__(knots, coeffs, q_start=q0_v, q_end=qf_v)
+        # PPoly stores the highest power first: (3, 5, n) ascending -> (5, 3, n) descending.
+        poly = PPoly(np.ascontiguousarray(coeffs[:, ::-1, :].transpose(1, 0, 2)), knots)
+        super().__init__(poly, q_start=q0_v, q_end=qf_v)
         self.q0 = _readonly(q0_v)
         self.qf = _readonly(qf_v)
         self.lift_off_position = _readonly(q_lift)
@@ -623,16 +523,16 @@ class Quintic(PiecewisePolynomial):
         n = q0_v.size
         qf_v = _as_vector("qf", qf, n)
         T = _as_positive("duration", duration)
-        c = _quintic_coefficients(
-            T,
-            q0_v,
-            _as_broadcast_vector("qd0", qd0, n),
+        velocities = (_as_broadcast_vector("qd0", qd0, n), _as_broadcast_vector("qdf", qdf, n))
+        accelerations = (
             _as_broadcast_vector("qdd0", qdd0, n),
-            qf_v,
-            _as_broadcast_vector("qdf", qdf, n),
             _as_broadcast_vector("qddf", qddf, n),
         )
-        super().__init__(np.array([0.0, T]), c[None], q_start=q0_v, q_end=qf_v)
+        knots = np.array([0.0, T])
+        poly = _hermite_quintics(
+            knots, np.stack((q0_v, qf_v)), np.stack(velocities), np.stack(accelerations)
+        )
+        super().__init__(poly, q_start=q0_v, q_end=qf_v)
         self.q0 = _readonly(q0_v)
         self.qf = _readonly(qf_v)
 
@@ -732,13 +632,7 @@ class Waypoints(PiecewisePolynomial):
         else:
             Acc = np.vstack((np.zeros(n), _as_matrix("accelerations", accelerations, (m, n))))
 
-        coeffs = np.stack(
-            [
-                _quintic_coefficients(dt[j], P[j], V[j], Acc[j], P[j + 1], V[j + 1], Acc[j + 1])
-                for j in range(m)
-            ]
-        )
-        super().__init__(knots, coeffs, q_start=q0, q_end=P[-1])
+        super().__init__(_hermite_quintics(knots, P, V, Acc), q_start=q0, q_end=P[-1])
         self.knot_positions = _readonly(P)
         self.knot_velocities = _readonly(V)
         self.knot_accelerations = _readonly(Acc)
