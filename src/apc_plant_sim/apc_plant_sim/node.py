@@ -29,6 +29,7 @@ time, again every ``resend_s`` until both torques answer it, then the clock runs
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from typing import Any
@@ -165,17 +166,14 @@ class PlantNode(Node):
         # watchdog, so the arm braked mid-move). Best effort matches the controllers' reliable
         # publishers and hands over what arrives. Lockstep needs every sample: reliable.
         torque_qos = qos if self.mode == "lockstep" else best_effort(qos)
-        self.ff_sub = self.create_subscription(
-            JointState,
-            wire.FEEDFORWARD_TORQUE,
-            guarded(self, diag, wire.FEEDFORWARD_TORQUE, self._on_feedforward),
-            torque_qos,
-        )
-        self.fb_sub = self.create_subscription(
-            JointState,
-            wire.FEEDBACK_TORQUE,
-            guarded(self, diag, wire.FEEDBACK_TORQUE, self._on_feedback),
-            torque_qos,
+        self.ff_sub, self.fb_sub = (
+            self.create_subscription(
+                JointState,
+                source.value,
+                guarded(self, diag, source.value, functools.partial(self._take, source)),
+                torque_qos,
+            )
+            for source in Source
         )
         self._diagnostics_pub = DiagnosticsPublisher(self, self.diagnostics)
         if self.mode == "lockstep":
@@ -217,12 +215,6 @@ class PlantNode(Node):
     def started(self) -> bool:
         return self.intake.started
 
-    def _on_feedforward(self, msg: JointState) -> None:
-        self._take(Source.NOMINAL, msg)
-
-    def _on_feedback(self, msg: JointState) -> None:
-        self._take(Source.FEEDBACK, msg)
-
     def _take(self, source: Source, msg: JointState) -> None:
         """File a torque with the intake; count what it did (see ``TorqueIntake.take``)."""
         topic = source.value
@@ -241,22 +233,23 @@ class PlantNode(Node):
             self._lockstep_try()
 
     # -- lockstep -------------------------------------------------------------------------------
-    def _ready(self) -> bool:
-        return (
-            self.js_pub.get_subscription_count() >= self._values["wait_for_subscribers"]
-            and self.ff_sub.get_publisher_count() >= 1
-            and self.fb_sub.get_publisher_count() >= 1
-        )
+    def _start_when_ready(self, what: str) -> None:
+        """Send sample 0 once ``wait_for_subscribers`` nodes listen and both torque topics have
+        a publisher; until then the arm stays still, like a robot whose brakes stay on until
+        its controllers are up."""
+        if not self._missing_peers():
+            self.intake.started = True
+            self.get_logger().info(f"{what}: starting at sample {self.k}")
+            self._publish_state()
 
     def _lockstep_watch(self) -> None:
         if self.done:
             return
         if not self.started:
-            if self._ready():
-                self.intake.started = True
-                self.get_logger().info(f"lockstep: starting at sample {self.k}")
-                self._publish_state()
-            elif time.monotonic() - self._created_wall > self._values["lockstep_timeout_s"]:
+            self._start_when_ready("lockstep")
+            if not self.started and (
+                time.monotonic() - self._created_wall > self._values["lockstep_timeout_s"]
+            ):
                 self._fail(
                     f"lockstep: peers missing after {self._values['lockstep_timeout_s']} s: "
                     f"{self._missing_peers()}"
@@ -275,20 +268,18 @@ class PlantNode(Node):
             self._publish_state(resend=True)
 
     def _missing_peers(self) -> str:
+        """The peers sample 0 waits for that are not there ("" when all are)."""
         missing = []
-        subscribers = self.js_pub.get_subscription_count()
-        if subscribers < self._values["wait_for_subscribers"]:
-            missing.append(
-                f"{subscribers} of {self._values['wait_for_subscribers']} subscribers on "
-                f"{wire.JOINT_STATES}"
-            )
-        for sub, topic in (
-            (self.ff_sub, wire.FEEDFORWARD_TORQUE),
-            (self.fb_sub, wire.FEEDBACK_TORQUE),
-        ):
+        subscribers, wanted = (
+            self.js_pub.get_subscription_count(),
+            self._values["wait_for_subscribers"],
+        )
+        if subscribers < wanted:
+            missing.append(f"{subscribers} of {wanted} subscribers on {wire.JOINT_STATES}")
+        for source, sub in zip(Source, (self.ff_sub, self.fb_sub), strict=True):
             if sub.get_publisher_count() < 1:
-                missing.append(f"no publisher on {topic}")
-        return "; ".join(missing) or "none"
+                missing.append(f"no publisher on {source.value}")
+        return "; ".join(missing)
 
     def _fail(self, message: str) -> None:
         self.get_logger().error(message)
@@ -337,11 +328,7 @@ class PlantNode(Node):
             return
         now = time.monotonic()
         if not self.started:
-            # Like a robot whose brakes stay on until its controllers are up.
-            if self._ready():
-                self.intake.started = True
-                self.get_logger().info("real time: controllers connected, starting")
-                self._publish_state()
+            self._start_when_ready("real time")
             return
         tick = self.intake.tick(self.k)
         if tick.action is Action.WAIT:
