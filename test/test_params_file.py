@@ -10,9 +10,11 @@ import pytest
 import rclpy
 import yaml
 from numpy.testing import assert_allclose
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from apc_core.defaults import load
+from apc_core.robot import Payload, with_payload
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_plant_sim.node import PlantNode
@@ -109,3 +111,28 @@ def test_without_out_the_file_goes_to_standard_output(capsys):
     )
     # A name in apc's config directory stays a name (the nodes find it there too).
     assert "robot_description_path: puma560_3dof.urdf" in text
+
+
+def test_a_plant_given_only_the_urdf_starts_mid_range_with_the_payload_on_the_last_link():
+    urdf, lock = _arm("panda")
+    robot, derived = load(urdf, lock_joints=lock)
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = PlantNode(
+            context=context,
+            parameter_overrides=[
+                Parameter("robot_description_path", value=urdf),
+                Parameter("lock_joints", value=lock),
+                Parameter("payload.mass_kg", value=2.0),
+            ],
+        )
+        # The Panda's zero pose is outside joint 4's range; the middle of each range is not.
+        assert_allclose(np.rad2deg(node.plant.q), derived.q_start_deg, atol=1e-9)
+        expected = with_payload(robot, Payload(2.0, frame="panda_hand")).model.inertias[7]
+        assert node.arm.loaded.model.inertias[7].isApprox(expected)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -23,7 +23,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from apc_core.defaults import derive
 from apc_core.params import ConfigError, Param
 from apc_core.robot import (
     PAPER_GRAVITY_M_S2,
@@ -40,6 +41,7 @@ from apc_core.robot import (
     Robot,
     RobotModelError,
     load_robot,
+    read_urdf,
     with_inertia_error,
 )
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
@@ -144,6 +146,26 @@ def controller_robot_from_params(values: dict[str, Any]) -> Robot:
         return with_inertia_error(robot, error)
     except RobotModelError as exc:
         raise ConfigError(f"parameter 'inertia_error': {exc}") from None
+
+
+def fill_derived(values: dict[str, Any], robot: Robot, derived: Mapping[str, str]) -> list[str]:
+    """Give each empty parameter in ``derived`` (parameter name -> :class:`ArmDefaults` field)
+    the default derived from the arm's URDF (:mod:`apc_core.defaults`), in ``values``.
+
+    Returns one line per default so chosen, saying what and how: the node logs them once its
+    whole configuration is accepted, so a bad parameter still stops it with one line.
+    """
+    empty = [name for name in derived if not values[name]]
+    if not empty:
+        return []
+    xml = values.get("robot_description", "")
+    if not xml:
+        xml, _ = read_urdf(resolve_config_path(values["robot_description_path"]))
+    defaults = derive(robot, xml)
+    for name in empty:
+        value = getattr(defaults, derived[name])
+        values[name] = list(value) if isinstance(value, tuple) else value
+    return [defaults.describe(derived[name], name) for name in empty]
 
 
 class Diagnostics:

@@ -48,6 +48,7 @@ from apc_core.nodeutil import (
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
+    fill_derived,
     guarded,
     reject,
     robot_from_params,
@@ -59,6 +60,9 @@ from apc_plant_sim.plant import PlantError
 from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
 
 MODES = ("realtime", "lockstep")
+
+#: Parameters that, left empty, take a default derived from the URDF (-> ArmDefaults field).
+DERIVED = {"q_initial_deg": "q_start_deg", "payload.frame": "payload_frame"}
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
@@ -130,7 +134,10 @@ class PlantNode(Node):
             raise ConfigError(
                 f"parameter 'mode': must be one of {', '.join(MODES)}, got {self.mode!r}"
             )
+        chosen = fill_derived(values, robot, DERIVED)
         self.arm = SimulatedArm.from_params(robot, values)
+        for line in chosen:
+            self.get_logger().info(line)
         self.plant = self.arm.plant
         self.period_ns = wire.seconds_to_ns(self.plant.config.period)
         self.n_samples = values["n_samples"]

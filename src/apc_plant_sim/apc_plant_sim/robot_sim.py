@@ -41,6 +41,7 @@ from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
+    fill_derived,
     guarded,
     robot_from_params,
     run_node,
@@ -164,7 +165,8 @@ class RobotSimNode(Node):
         robot = robot_from_params(values)
         n = robot.n_joints
         config = _driver_config(values)
-        q0 = values["q_initial_deg"] or [0.0] * n
+        chosen = fill_derived(values, robot, plant_node.DERIVED)
+        q0 = values["q_initial_deg"]
         if len(q0) != n:
             raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
         payload = payload_from_values(robot, values)
@@ -187,6 +189,8 @@ class RobotSimNode(Node):
             self.driver = RobotDriver(self.engine, config)
         except DriverError as exc:
             raise ConfigError(f"parameter '{str(exc).split(':')[0]}': {exc}") from None
+        for line in chosen:
+            self.get_logger().info(line)
         self._pickup_s = at_s
         self.sim_time = bool(values["sim_time"])
         self._sim_wait_s = float(values["sim_wait_s"])

@@ -20,7 +20,11 @@ from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 ARM_PARAMS: tuple[Param, ...] = (
     *params_from(PlantConfig, ""),
     Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
-    Param("payload.frame", "", "frame carrying the payload; empty = body of the last joint"),
+    Param(
+        "payload.frame",
+        "",
+        "frame carrying the payload; empty = the URDF's last link (fixed to the last joint)",
+    ),
     Param("payload.com_m", [0.0, 0.0, 0.0], "payload centre of mass in payload.frame (m)"),
     Param(
         "payload.at_s",
@@ -29,7 +33,11 @@ ARM_PARAMS: tuple[Param, ...] = (
         0.0,
         1e9,
     ),
-    Param("q_initial_deg", [], "initial joint positions (deg, URDF angles); empty = zeros"),
+    Param(
+        "q_initial_deg",
+        [],
+        "initial joint positions (deg, URDF angles); empty = the middle of each joint's range",
+    ),
 )
 
 
