@@ -27,7 +27,8 @@ from apc_plant_sim.metrics import compute_metrics
 from apc_plant_sim.recording import RecordedRun, load_run
 
 
-def _robot_of(run: RecordedRun) -> Robot | None:
+def robot_of(run: RecordedRun) -> Robot | None:
+    """The arm of a recording's stored scenario (for the tip metric); None without one."""
     scenario = run.run.get("scenario", {})
     urdf = scenario.get("urdf")
     if not urdf:
@@ -53,7 +54,7 @@ def analyze_file(path: str | Path) -> dict[str, Any]:
         run.q_d,
         applied,
         run.move_end_index,
-        robot=_robot_of(run),
+        robot=robot_of(run),
         residual_norm=run.residual_norm,
     )
     return {

@@ -22,7 +22,9 @@ Robotics Toolbox model ``Puma560`` (the consensus set of P. Corke and B. Armstro
 search for consensus among model parameters reported for the PUMA 560 robot", ICRA 1994; the
 friction is that identified by B. Armstrong, O. Khatib and J. Burdick, "The explicit dynamic
 model and inertial parameters of the PUMA 560 arm", ICRA 1986), referred to the joint side as
-the Toolbox does: armature ``J_m G²``, viscous ``B G²``, Coulomb ``T_c |G|``.
+the Toolbox does: armature ``J_m G²``, viscous ``B G²``, Coulomb ``T_c |G|``. The Franka Panda
+defaults (:func:`panda_effects`) are an identified friction, Franka's reflected rotor inertias
+and an assumed encoder; each source is named at its constant.
 """
 
 from __future__ import annotations
@@ -50,6 +52,24 @@ PUMA560_MOTOR_COULOMB_NEG_NM = (0.435, 0.071, 0.105)  # |T_c| for q' < 0
 # data; an assumption of the order of the PUMA's motor encoders), so the joint resolution is
 # 2 pi / (1000 |G|): 1.0e-4, 5.8e-5 and 1.2e-4 rad on joints 1-3.
 PUMA560_ENCODER_COUNTS_PER_MOTOR_REV = 1000.0
+
+
+# Franka Emika Panda, joints 1-7. Friction: the identification of C. Gaz, M. Cognetti, A. Oliva,
+# P. Robuffo Giordano and A. De Luca, "Dynamic identification of the Franka Emika Panda robot with
+# retrieval of feasible parameters using penalty-based optimization", IEEE RA-L 2019: per joint
+# tau_f = phi1 / (1 + exp(-phi2 (q' + phi3))) - phi1 / (1 + exp(-phi2 phi3)), no viscous term; its
+# levels for q' -> +inf and -inf are the Coulomb friction in each direction.
+PANDA_FRICTION_PHI1_NM = (0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489)
+PANDA_FRICTION_PHI2_S_RAD = (5.1181, 9.0657, 10.136, 5.5903, 8.3469, 17.133, 10.336)
+PANDA_FRICTION_PHI3_RAD_S = (0.039533, 0.025882, -0.04607, 0.036194, 0.026226, -0.021047, 0.0035526)
+# Rotor inertia reflected through the gears (kg m^2): Franka's data for its FR3 arm (the Panda's
+# successor, same drive sizes), as Drake's franka_description carries it; Franka publishes none
+# for the Panda itself.
+PANDA_REFLECTED_INERTIA_KGM2 = (0.605721456, 0.605721456, 0.462474144, 0.462474144,
+                                0.205544064, 0.205544064, 0.205544064)  # fmt: skip
+# Franka publishes no encoder resolution: 2^16 counts per joint revolution (9.6e-5 rad, the order
+# of the PUMA's joint-side resolution above) is an assumption.
+PANDA_ENCODER_COUNTS_PER_JOINT_REV = 65536.0
 
 
 class EffectsError(ValueError):
@@ -168,6 +188,30 @@ def puma560_effects(
         counts_per_rev=tuple(counts),
         velocity=velocity,
         velocity_noise_rad_s=float(2.0 * np.pi / counts.min() / 0.010),
+        command_delay=command_delay,
+        seed=seed,
+    )
+
+
+def panda_effects(
+    velocity: VelocitySource = "difference", command_delay: int = 1, seed: int = 0
+) -> ArmEffects:
+    """Every effect on for the Franka Emika Panda (7 joints), from the data above.
+
+    Coulomb friction is Gaz et al.'s sigmoid at full speed, ``phi1 / (1 + exp(phi2 phi3))`` for
+    ``q' > 0`` and ``phi1 / (1 + exp(-phi2 phi3))`` for ``q' < 0``; no viscous friction (their
+    model has none). The velocity noise of ``velocity="noisy"`` is one encoder count per 10 ms.
+    """
+    phi1 = np.array(PANDA_FRICTION_PHI1_NM)
+    shift = np.array(PANDA_FRICTION_PHI2_S_RAD) * np.array(PANDA_FRICTION_PHI3_RAD_S)
+    counts = PANDA_ENCODER_COUNTS_PER_JOINT_REV
+    return ArmEffects(
+        coulomb_pos_nm=tuple(phi1 / (1.0 + np.exp(shift))),
+        coulomb_neg_nm=tuple(phi1 / (1.0 + np.exp(-shift))),
+        armature_kgm2=PANDA_REFLECTED_INERTIA_KGM2,
+        counts_per_rev=(counts,) * len(phi1),
+        velocity=velocity,
+        velocity_noise_rad_s=float(2.0 * np.pi / counts / 0.010),
         command_delay=command_delay,
         seed=seed,
     )

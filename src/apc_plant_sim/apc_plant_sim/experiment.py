@@ -73,17 +73,8 @@ class RunSpec:
         feedback: dict[str, Any] = {
             **shared,
             "inertia_error": [float(v) for v in sc.inertia_error],
-            "controller": self.controller,
+            **law_parameters(self.controller, self.settings),
         }
-        prefix = "adaptive." if self.controller == "adaptive" else "gains."
-        from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
-
-        declared = {p.name for p in FEEDBACK_PARAMS}
-        for key, value in (self.settings or {}).items():
-            if prefix + key not in declared:
-                # An override of an undeclared parameter would be dropped silently by rclpy.
-                raise ValueError(f"setting '{key}' is not a parameter of feedback_node")
-            feedback[prefix + key] = value if isinstance(value, (str, int)) else float(value)
         plant = {
             **shared,
             "step": float(sc.step),
@@ -99,6 +90,22 @@ class RunSpec:
         return {"feedforward_node": feedforward, "feedback_node": feedback, "plant_node": plant}
 
 
+def law_parameters(controller: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The feedback law's node parameters: ``controller`` and each setting under its prefix
+    (``adaptive.`` or ``gains.``), as declared by ``feedback_node`` (and ``robot_node``)."""
+    from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
+
+    prefix = "adaptive." if controller == "adaptive" else "gains."
+    declared = {p.name for p in FEEDBACK_PARAMS}
+    out: dict[str, Any] = {"controller": controller}
+    for key, value in (settings or {}).items():
+        if prefix + key not in declared:
+            # An override of an undeclared parameter would be dropped silently by rclpy.
+            raise ValueError(f"setting '{key}' is not a parameter of feedback_node")
+        out[prefix + key] = value if isinstance(value, (str, int)) else float(value)
+    return out
+
+
 def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
     """True once the recorder has discovered the controllers' publishers (so sample 0 is kept)."""
     from apc_core import wire
@@ -109,7 +116,7 @@ def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
     return all(recorder.count_publishers(recorder.resolve_topic_name(t)) >= 1 for t in topics)
 
 
-def _wait(executor: Any, condition: Any, timeout_s: float, what: str) -> None:
+def wait_for(executor: Any, condition: Any, timeout_s: float, what: str) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:
@@ -149,7 +156,7 @@ def _drain(
         stop.check()
 
 
-def _overrides(values: Mapping[str, Any]) -> list[Parameter]:
+def overrides(values: Mapping[str, Any]) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in values.items()]
 
 
@@ -225,18 +232,18 @@ def run_in_process(
             nodes.append(recorder)
             nodes.append(
                 FeedforwardNode(
-                    context=context, parameter_overrides=_overrides(params["feedforward_node"])
+                    context=context, parameter_overrides=overrides(params["feedforward_node"])
                 )
             )
             nodes.append(
                 FeedbackNode(
-                    context=context, parameter_overrides=_overrides(params["feedback_node"])
+                    context=context, parameter_overrides=overrides(params["feedback_node"])
                 )
             )
             executor = make_executor(executor_kind, context)
             for node in nodes:
                 executor.add_node(node)
-            _wait(
+            wait_for(
                 executor,
                 lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
                 30.0,
@@ -244,7 +251,7 @@ def run_in_process(
             )
             # The plant comes last: it starts the run once everything listens
             # (wait_for_subscribers).
-            plant = PlantNode(context=context, parameter_overrides=_overrides(params["plant_node"]))
+            plant = PlantNode(context=context, parameter_overrides=overrides(params["plant_node"]))
             nodes.append(plant)
             executor.add_node(plant)
             bar = Progress(plant.n_samples, spec.name, progress)
@@ -331,7 +338,7 @@ def run_in_processes(
 
             start("feedforward_node")
             start("feedback_node")
-            _wait(
+            wait_for(
                 executor,
                 lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
                 60.0,
