@@ -7,6 +7,7 @@ import pytest
 
 from apc_core.nodeutil import resolve_config_path
 from apc_core.robot import Payload, load_robot, with_payload
+from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import PinocchioEngine
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.robot_driver import DriverConfig, DriverError, RobotDriver
@@ -190,3 +191,55 @@ def test_pinocchio_engine_picks_the_payload_up():
     for e in (engine, bare):
         e.advance(np.zeros(3), 0.01)
     assert not np.allclose(engine.q, bare.q)
+
+
+class MovingEngine(RecordingEngine):
+    """Moves at constant speed qd per period (q' = qd)."""
+
+    def advance(self, tau: np.ndarray, duration: float) -> None:
+        super().advance(tau, duration)
+        self.q = self.q + self.qd * duration
+
+
+def test_encoder_quantises_positions_and_the_drive_differences_them():
+    engine = MovingEngine()
+    counts = (1000.0, 2000.0, 4000.0)
+    sensing = ArmEffects(counts_per_rev=counts, velocity="difference")
+    driver = RobotDriver(engine, DriverConfig(state_rate=100.0, sensing=sensing))
+    resolution = 2 * np.pi / np.array(counts)
+    driver.offer([0.0, 0.0, 0.0], 0.0)
+    previous = driver.measure(0.0).position
+    for k in range(1, 5):
+        driver.advance(0.01 * (k - 1))
+        reading = driver.measure(0.01 * k)
+        steps = reading.position / resolution
+        np.testing.assert_allclose(steps, np.round(steps), atol=1e-9)
+        assert (np.abs(reading.position - engine.q) <= resolution / 2 + 1e-12).all()
+        np.testing.assert_allclose(reading.velocity, (reading.position - previous) / 0.01)
+        previous = reading.position
+
+
+def test_noisy_drive_velocity_has_the_configured_spread_and_a_seed():
+    def velocities(seed: int) -> np.ndarray:
+        engine = RecordingEngine()
+        sensing = ArmEffects(velocity="noisy", velocity_noise_rad_s=0.05, seed=seed)
+        driver = RobotDriver(engine, DriverConfig(sensing=sensing))
+        driver.offer([0.0, 0.0, 0.0], 0.0)
+        out = []
+        for k in range(2000):
+            driver.advance(0.002 * k)
+            out.append(driver.measure(0.002 * k).velocity - engine.qd)
+        return np.array(out)
+
+    noise = velocities(1)
+    assert np.std(noise) == pytest.approx(0.05, rel=0.05)
+    np.testing.assert_array_equal(noise, velocities(1))
+
+
+def test_command_delay_applies_each_command_whole_periods_later():
+    driver, engine = _driver(sensing=ArmEffects(command_delay=2))
+    for k in range(5):
+        driver.offer([float(k), 0.0, 0.0], 0.002 * k)
+        driver.advance(0.002 * k)
+    # The first command is held for the two periods before it is due (as the arm held it).
+    assert [tau[0] for tau, _ in engine.applied] == [0.0, 0.0, 0.0, 1.0, 2.0]

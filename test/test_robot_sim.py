@@ -133,10 +133,14 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
         assert all(v == 0.0 for v in peer.states[-1][1].effort)
 
 
-def test_sim_time_robot_steps_only_when_the_controller_answers(graph, tmp_path):
+@pytest.mark.parametrize(
+    "engine", [("engine:=pinocchio",), ("engine:=mujoco", "effects:=puma560")], ids=lambda e: e[0]
+)
+def test_sim_time_robot_steps_only_when_the_controller_answers(graph, tmp_path, engine):
     peer = Peer(graph, topic="/arm/commands")
     with robot_sim(
         tmp_path,
+        *engine,
         "sim_time:=true",
         "state_rate:=100.0",
         "command_topic:=/arm/commands",
@@ -156,13 +160,21 @@ def test_sim_time_robot_steps_only_when_the_controller_answers(graph, tmp_path):
 
 
 def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):
-    for param, name in (
-        ("engine:=bullet", "engine"),
-        ("command_joints:=[joint_1, joint_2]", "command_joints"),
-        ("q_initial_deg:=[1.0]", "q_initial_deg"),
+    for params, name in (
+        (["engine:=bullet"], "engine"),
+        (["command_joints:=[joint_1, joint_2]"], "command_joints"),
+        (["q_initial_deg:=[1.0]"], "q_initial_deg"),
+        (["engine:=mujoco", "mujoco.integrator:=Verlet"], "mujoco.integrator"),
+        (["engine:=mujoco", "damping:=[1.0]"], "damping"),
+        (["engine:=mujoco", "frictionloss:=[1.0, -1.0, 0.0]"], "frictionloss"),
+        (["engine:=pinocchio", "armature:=[0.1, 0.1, 0.1]"], "armature"),
+        (["effects:=puma"], "effects"),
+        (["velocity_source:=tacho"], "velocity_source"),
+        (["encoder_counts_per_rev:=[0.0, 1.0, 1.0]"], "encoder_counts_per_rev"),
     ):
+        args = [a for p in params for a in ("-p", p)]
         proc = subprocess.run(
-            [sys.executable, "-m", "apc_plant_sim.robot_sim", "--ros-args", "-p", param],
+            [sys.executable, "-m", "apc_plant_sim.robot_sim", "--ros-args", *args],
             capture_output=True,
             text=True,
             timeout=60,

@@ -10,19 +10,22 @@ An engine holds the arm's state and integrates it under a torque held for one dr
   (:mod:`apc_plant_sim.mujoco_arm`), with the effects of a physical arm.
 
 The payload is apc's: a point mass in a named frame, on from the start or picked up at a given
-time (:meth:`load_payload`).
+time (:meth:`load_payload`). What a physical arm adds is :class:`ArmEffects`: friction and
+armature go to the MuJoCo engine, the sensing effects to the driver.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, RobotModelError, with_payload
+from apc_plant_sim.effects import ArmEffects, puma560_effects
 from apc_plant_sim.plant import Plant, PlantConfig
 
 ENGINES = ("pinocchio", "mujoco")
@@ -44,19 +47,20 @@ def payload_from_values(robot: Robot, values: Mapping[str, Any]) -> Payload:
     return payload
 
 
-class PinocchioEngine:
-    """apc's plant model as a driver's engine: RK4 substeps of at most ``max_step`` seconds.
+class EngineSetup:
+    """What both engines take: the arm, its payload, the driver period and the step bound.
 
     Parameters
     ----------
     robot : Robot
         The arm without payload.
     payload : Payload
-        Carried from the start (``loaded=True``) or from :meth:`load_payload`.
+        Carried from the start (``loaded=True``) or from ``load_payload()``.
     period : float
-        The driver period (s); every :meth:`advance` integrates exactly this long.
+        The driver period (s); every ``advance`` integrates exactly this long.
     max_step : float
-        Longest RK4 step (s); the period is split into ``ceil(period / max_step)`` equal steps.
+        Longest integration step (s); the period is split into ``ceil(period / max_step)``
+        equal steps.
     q0 : (n,) array
         Initial position (rad).
     """
@@ -72,15 +76,31 @@ class PinocchioEngine:
         loaded: bool = True,
     ) -> None:
         try:
-            self._loaded_robot = with_payload(robot, payload)
+            self.loaded_robot = with_payload(robot, payload)
         except RobotModelError as exc:
             raise ConfigError(f"parameter 'payload.frame': {exc}") from None
-        substeps = max(1, math.ceil(period / max_step - 1e-9))
-        config = PlantConfig(period=period, step=period / substeps, enforce_torque_limits=False)
+        self.robot = robot
+        self.period = period
+        self.substeps = max(1, math.ceil(period / max_step - 1e-9))
+        self.q0 = np.asarray(q0, dtype=float)
+        self.loaded = loaded or payload.mass_kg == 0.0
         self.joint_names = robot.joint_names
         self.effort_limit = robot.effort_limit.copy()
-        self.loaded = loaded or payload.mass_kg == 0.0
-        self.plant = Plant(self._loaded_robot if self.loaded else robot, config, q0)
+
+    def check_duration(self, duration: float) -> None:
+        if abs(duration - self.period) > 1e-12:
+            raise ValueError(f"the engine integrates {self.period} s per call, asked {duration}")
+
+
+class PinocchioEngine(EngineSetup):
+    """apc's plant model as a driver's engine: RK4 substeps (see :class:`EngineSetup`)."""
+
+    def __init__(self, robot: Robot, payload: Payload, **setup: Any) -> None:
+        super().__init__(robot, payload, **setup)
+        config = PlantConfig(
+            period=self.period, step=self.period / self.substeps, enforce_torque_limits=False
+        )
+        self.plant = Plant(self.loaded_robot if self.loaded else robot, config, self.q0)
 
     @property
     def q(self) -> np.ndarray:
@@ -91,10 +111,7 @@ class PinocchioEngine:
         return self.plant.qd
 
     def advance(self, tau: np.ndarray, duration: float) -> None:
-        if abs(duration - self.plant.config.period) > 1e-12:
-            raise ValueError(
-                f"the pinocchio engine integrates {self.plant.config.period} s, asked {duration}"
-            )
+        self.check_duration(duration)
         self.plant.step(tau)
 
     def hold(self) -> None:
@@ -103,5 +120,121 @@ class PinocchioEngine:
     def load_payload(self) -> None:
         """The payload is picked up: from now on the arm carries it (state kept)."""
         if not self.loaded:
-            self.plant.set_robot(self._loaded_robot)
+            self.plant.set_robot(self.loaded_robot)
             self.loaded = True
+
+
+#: ``effects`` presets: every effect of a physical arm from its data (name -> builder).
+EFFECT_PRESETS = ("ideal", "puma560")
+VELOCITY_SOURCES = ("exact", "noisy", "difference")
+
+
+def effects_from_values(values: Mapping[str, Any], n: int) -> ArmEffects:
+    """The physical-arm parameters as :class:`ArmEffects` (friction, armature and sensing).
+
+    ``effects`` picks the preset (``ideal``: all off; ``puma560``: the three-joint PUMA 560's
+    motor, gear and friction data, :func:`apc_plant_sim.effects.puma560_effects`); each
+    per-joint parameter that is not empty, ``velocity_source`` when not empty and
+    ``velocity_noise`` / ``command_delay_cycles`` when >= 0 replace the preset's value.
+    MuJoCo's ``frictionloss`` is symmetric: a preset's Coulomb levels for the two directions
+    become their mean.
+    """
+    preset = values["effects"]
+    if preset == "ideal":
+        base = ArmEffects()
+    elif preset == "puma560":
+        if n != 3:
+            raise ConfigError(
+                f"parameter 'effects': 'puma560' carries data for joints 1-3, the arm has {n}"
+            )
+        base = puma560_effects()
+    else:
+        raise ConfigError(
+            f"parameter 'effects': must be one of {', '.join(EFFECT_PRESETS)}, got {preset!r}"
+        )
+    coulomb = tuple(
+        0.5 * (p + m) for p, m in zip(base.coulomb_pos_nm, base.coulomb_neg_nm, strict=True)
+    )
+    chosen: dict[str, Any] = {}
+    for param, field, preset_value in (
+        ("damping", "viscous_nm_s", base.viscous_nm_s),
+        ("frictionloss", "coulomb_pos_nm", coulomb),
+        ("armature", "armature_kgm2", base.armature_kgm2),
+        ("encoder_counts_per_rev", "counts_per_rev", base.counts_per_rev),
+    ):
+        value = tuple(values[param]) or preset_value
+        if value and len(value) != n:
+            raise ConfigError(f"parameter '{param}': needs {n} values, got {len(value)}")
+        if not all(math.isfinite(v) and v >= 0.0 for v in value):
+            raise ConfigError(f"parameter '{param}': every value must be >= 0, got {list(value)}")
+        if param == "encoder_counts_per_rev" and not all(v > 0.0 for v in value):
+            raise ConfigError(f"parameter '{param}': every value must be > 0, got {list(value)}")
+        chosen[field] = value
+    chosen["coulomb_neg_nm"] = chosen["coulomb_pos_nm"]
+    velocity = values["velocity_source"] or base.velocity
+    if velocity not in VELOCITY_SOURCES:
+        raise ConfigError(
+            f"parameter 'velocity_source': must be one of {', '.join(VELOCITY_SOURCES)}, "
+            f"got {velocity!r}"
+        )
+    chosen["velocity"] = velocity
+    noise = values["velocity_noise"]
+    chosen["velocity_noise_rad_s"] = noise if noise >= 0.0 else base.velocity_noise_rad_s
+    delay = values["command_delay_cycles"]
+    chosen["command_delay"] = delay if delay >= 0 else base.command_delay
+    chosen["seed"] = values["seed"]
+    return replace(base, **chosen)
+
+
+def make_engine(
+    name: str,
+    robot: Robot,
+    payload: Payload,
+    effects: ArmEffects,
+    *,
+    period: float,
+    max_step: float,
+    q0: np.ndarray,
+    loaded: bool,
+    integrator: str = "RK4",
+) -> PinocchioEngine | Any:
+    """The engine called ``name`` (:data:`ENGINES`); a bad choice names its parameter.
+
+    ``pinocchio`` integrates the ideal arm: friction and armature are MuJoCo's (the engine that
+    integrates them with its own constraint solver), so asking for them with ``pinocchio``
+    stops with the parameter's name.
+    """
+    if name == "pinocchio":
+        for param, field in (
+            ("damping", "viscous_nm_s"),
+            ("frictionloss", "coulomb_pos_nm"),
+            ("armature", "armature_kgm2"),
+        ):
+            if any(getattr(effects, field)):
+                raise ConfigError(
+                    f"parameter '{param}': the pinocchio engine integrates the ideal arm; "
+                    "use engine mujoco for friction and armature"
+                )
+        return PinocchioEngine(
+            robot, payload, period=period, max_step=max_step, q0=q0, loaded=loaded
+        )
+    if name == "mujoco":
+        from apc_plant_sim.mujoco_arm import JointEffects, MujocoEngine
+
+        n = robot.n_joints
+        joint_effects = JointEffects(
+            damping=tuple(effects.per_joint("viscous_nm_s", n)),
+            frictionloss=tuple(effects.per_joint("coulomb_pos_nm", n)),
+            armature=tuple(effects.per_joint("armature_kgm2", n)),
+        )
+        return MujocoEngine(
+            robot,
+            payload,
+            period=period,
+            max_step=max_step,
+            q0=q0,
+            loaded=loaded,
+            effects=joint_effects,
+            integrator=integrator,
+        )
+    raise ConfigError(f"parameter 'engine': must be one of {', '.join(ENGINES)}, got {name!r}")

@@ -12,7 +12,9 @@ the robot's clock, and an effort ``forward_command_controller`` writes the newes
   non-finite value is rejected and counted, never applied; a good one replaces the one held;
 - :meth:`RobotDriver.advance` is ``write()`` plus the physics: the held command (or the safe
   torque after ``command_timeout``), clipped to the effort limits, is applied over one driver
-  period ``1 / state_rate`` and the engine integrates it.
+  period ``1 / state_rate`` (``command_delay`` periods later, if set) and the engine
+  integrates it; then the drives read the arm (quantised positions, the velocity the drive
+  reports) for the next ``read()``.
 
 Before the first command the arm stands still on its brakes, like an arm whose brakes release
 when its drives are enabled. After ``command_timeout`` seconds without a command the drive
@@ -27,11 +29,14 @@ with its brakes released, so a controller that relies on the hardware timeout se
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+
+from apc_plant_sim.effects import ArmEffects
 
 
 class DriverError(ValueError):
@@ -85,6 +90,12 @@ class DriverConfig:
     effort_limit : tuple of float
         |tau| bound per joint (N m); empty = the engine's (the URDF's). Every command is
         clipped to it and each clipped joint counted.
+    sensing : ArmEffects
+        What the drive adds between the arm and the wire (all off by default): encoder
+        quantisation (``counts_per_rev``), the velocity it reports (``velocity``: exact, with
+        white noise of ``velocity_noise_rad_s``, or the backward difference of the quantised
+        positions over one driver period) and a ``command_delay`` of whole driver periods.
+        Its friction and armature fields belong to the engine and are not read here.
     """
 
     state_rate: float = 500.0
@@ -96,6 +107,7 @@ class DriverConfig:
     publish_velocity: bool = True
     publish_effort: bool = True
     effort_limit: tuple[float, ...] = ()
+    sensing: ArmEffects = field(default_factory=ArmEffects)
 
     def __post_init__(self) -> None:
         for name in ("state_rate", "command_timeout"):
@@ -186,6 +198,18 @@ class RobotDriver:
         self._timed_out = False
         self._applied = np.zeros(n)  # torque over the period that ended at the last advance
         self.braked = True
+        sensing = config.sensing
+        try:
+            counts = sensing.per_joint("counts_per_rev", n)
+        except ValueError as exc:
+            raise DriverError(f"encoder_counts_per_rev: {exc}") from None
+        safe = np.where(counts > 0.0, counts, 1.0)
+        self._resolution = np.where(counts > 0.0, 2.0 * np.pi / safe, 0.0)
+        self._rng = np.random.default_rng(sensing.seed)
+        # Torques decided at the last command_delay cycles, oldest first (filled at the first).
+        self._delay_line: deque[np.ndarray] = deque()
+        self._q_measured = self._quantise(engine.q)
+        self._qd_measured = self._drive_velocity(self._q_measured, self._q_measured)
 
     # -- command subscription -------------------------------------------------------------------
     def offer(self, data: Sequence[float], now: float) -> str | None:
@@ -228,8 +252,28 @@ class RobotDriver:
 
     # -- read -----------------------------------------------------------------------------------
     def measure(self, now: float) -> Reading:
-        """The joint state at ``now`` as the robot publishes it."""
-        return self._reading(now, self.engine.q, self.engine.qd)
+        """The joint state at ``now`` as the robot publishes it (what its drives measured)."""
+        return self._reading(now, self._q_measured, self._qd_measured)
+
+    def _quantise(self, q: np.ndarray) -> np.ndarray:
+        r = self._resolution
+        return np.where(r > 0.0, np.round(q / np.where(r > 0.0, r, 1.0)) * r, q)
+
+    def _drive_velocity(self, q_measured: np.ndarray, q_previous: np.ndarray) -> np.ndarray:
+        source = self.config.sensing.velocity
+        if source == "difference":
+            return (q_measured - q_previous) / self.config.period
+        qd = np.array(self.engine.qd, dtype=float)
+        if source == "noisy":
+            noise = self.config.sensing.velocity_noise_rad_s
+            qd = qd + self._rng.normal(0.0, noise, qd.shape)
+        return qd
+
+    def _sense(self) -> None:
+        """The drives read the arm once per cycle, after it has moved."""
+        q_measured = self._quantise(self.engine.q)
+        self._qd_measured = self._drive_velocity(q_measured, self._q_measured)
+        self._q_measured = q_measured
 
     def _reading(self, now: float, q: np.ndarray, qd: np.ndarray) -> Reading:
         index = np.where(self._extra, 0, self._state_index)
@@ -257,6 +301,7 @@ class RobotDriver:
         if self._command is None:
             self.engine.hold()
             self._applied = np.zeros(len(self.joint_names))
+            self._sense()
             return self._applied
         self.braked = False
         tau, timed_out = self.torque(now)
@@ -272,8 +317,16 @@ class RobotDriver:
                 name = self.joint_names[i]
                 self.counts.clipped_per_joint[name] = self.counts.clipped_per_joint.get(name, 0) + 1
             tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        tau = np.array(tau, dtype=float)
+        delay = self.config.sensing.command_delay
+        if delay:
+            if not self._delay_line:  # before the first command the arm held it
+                self._delay_line.extend(tau.copy() for _ in range(delay))
+            self._delay_line.append(tau)
+            tau = self._delay_line.popleft()
         self.engine.advance(tau, self.config.period)
-        self._applied = np.array(tau, dtype=float)
+        self._applied = tau
+        self._sense()
         return self._applied
 
 

@@ -7,7 +7,10 @@ efforts the way an effort ``forward_command_controller`` does (``std_msgs/Float6
 on ``command_topic``, ``SystemDefaultsQoS``, one value per joint in ``command_joints`` order,
 the newest one held). The loop, the command checks, the effort limits and the command timeout
 are :class:`apc_plant_sim.robot_driver.RobotDriver`; the physics is ``engine``
-(:mod:`apc_plant_sim.engines`).
+(:mod:`apc_plant_sim.engines`): ``pinocchio`` (apc's plant) or ``mujoco`` (MuJoCo's own
+dynamics and integrator, :mod:`apc_plant_sim.mujoco_arm`). ``effects`` and the parameters after
+it add what a physical arm adds (friction, rotor inertia, encoder quantisation, the drive's
+velocity, a command delay); ``ideal`` turns them all off.
 
 Time
 ----
@@ -48,7 +51,16 @@ from apc_core.nodeutil import (
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_plant_sim import node as plant_node
-from apc_plant_sim.engines import ENGINES, PinocchioEngine, payload_from_values
+from apc_plant_sim.effects import ArmEffects
+from apc_plant_sim.engines import (
+    EFFECT_PRESETS,
+    ENGINES,
+    VELOCITY_SOURCES,
+    effects_from_values,
+    make_engine,
+    payload_from_values,
+)
+from apc_plant_sim.mujoco_arm import INTEGRATORS
 from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
 
 #: Where ros2_control's ``joint_state_broadcaster`` publishes (``use_local_topics: false``).
@@ -116,10 +128,51 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "physics_step",
         0.001,
-        "pinocchio engine: longest RK4 step (s); each period is split into equal steps",
+        "longest integration step (s); each driver period is split into equal steps",
         1e-6,
         1.0,
     ),
+    Param(
+        "mujoco.integrator",
+        "RK4",
+        f"mujoco engine: MuJoCo's integrator, one of {', '.join(INTEGRATORS)}",
+    ),
+    Param(
+        "effects",
+        "ideal",
+        f"what a physical arm adds, as a preset: {' or '.join(EFFECT_PRESETS)} (the 3-joint "
+        "PUMA 560's data); the parameters below override it one by one",
+    ),
+    Param("damping", [], "mujoco: viscous joint friction (N m s/rad per joint); empty = preset"),
+    Param("frictionloss", [], "mujoco: Coulomb joint friction (N m per joint); empty = preset"),
+    Param("armature", [], "mujoco: rotor inertia G^2 Jm (kg m^2 per joint); empty = preset"),
+    Param(
+        "encoder_counts_per_rev",
+        [],
+        "encoder counts per joint revolution (positions quantised); empty = preset",
+    ),
+    Param(
+        "velocity_source",
+        "",
+        f"velocity the drive reports: {', '.join(VELOCITY_SOURCES)} (difference of quantised "
+        "positions over one period); empty = preset",
+    ),
+    Param(
+        "velocity_noise",
+        -1.0,
+        "standard deviation of the velocity noise (rad/s, velocity_source noisy); -1 = preset",
+        -1.0,
+        1e3,
+    ),
+    Param(
+        "command_delay_cycles",
+        -1,
+        "whole driver periods between a command's arrival and its application, beyond the "
+        "drive's own; -1 = preset",
+        -1,
+        1000,
+    ),
+    Param("seed", 0, "seed of the velocity noise", 0, 2**31 - 1),
     Param("sim_time", False, "own the clock: publish /clock and step as the controllers answer"),
     Param(
         "sim_wait_s",
@@ -139,7 +192,7 @@ PARAMS: tuple[Param, ...] = (
 )
 
 
-def _driver_config(values: dict[str, Any]) -> DriverConfig:
+def _driver_config(values: dict[str, Any], effects: ArmEffects) -> DriverConfig:
     try:
         return DriverConfig(
             state_rate=values["state_rate"],
@@ -151,6 +204,7 @@ def _driver_config(values: dict[str, Any]) -> DriverConfig:
             publish_velocity=values["publish_velocity"],
             publish_effort=values["publish_effort"],
             effort_limit=tuple(values["effort_limit"]),
+            sensing=effects,
         )
     except DriverError as exc:
         raise ConfigError(f"parameter '{str(exc).split(':')[0]}': {exc}") from None
@@ -164,7 +218,8 @@ class RobotSimNode(Node):
         values = declare(self, PARAMS)
         robot = robot_from_params(values)
         n = robot.n_joints
-        config = _driver_config(values)
+        effects = effects_from_values(values, n)
+        config = _driver_config(values, effects)
         chosen = fill_derived(values, robot, plant_node.DERIVED)
         q0 = values["q_initial_deg"]
         if len(q0) != n:
@@ -172,18 +227,23 @@ class RobotSimNode(Node):
         payload = payload_from_values(robot, values)
         at_s = values["payload.at_s"] if payload.mass_kg > 0.0 else 0.0
         engine_name = values["engine"]
-        if engine_name == "pinocchio":
-            self.engine = PinocchioEngine(
-                robot,
-                payload,
-                period=config.period,
-                max_step=values["physics_step"],
-                q0=np.deg2rad(q0),
-                loaded=at_s == 0.0,
-            )
-        else:
-            raise ConfigError(
-                f"parameter 'engine': must be one of {', '.join(ENGINES)}, got {engine_name!r}"
+        self.engine = make_engine(
+            engine_name,
+            robot,
+            payload,
+            effects,
+            period=config.period,
+            max_step=values["physics_step"],
+            q0=np.deg2rad(q0),
+            loaded=at_s == 0.0,
+            integrator=values["mujoco.integrator"],
+        )
+        for correction in getattr(self.engine, "corrections", ()):
+            self.get_logger().info(
+                f"MuJoCo: inertia of the body of {correction.joint} made physical: principal "
+                f"moments {np.round(correction.before, 6).tolist()} -> "
+                f"{np.round(correction.after, 6).tolist()} kg m^2"
+                + (" (invisible to the joint-space dynamics)" if correction.invisible else "")
             )
         try:
             self.driver = RobotDriver(self.engine, config)
@@ -298,6 +358,8 @@ class RobotSimNode(Node):
 
     # -- wall time ------------------------------------------------------------------------------
     def _wall_cycle(self) -> None:
+        if not self.context.ok():  # a signal between the timer's wake-up and this call
+            return
         now = self._now()
         if self._start is None:
             self._start = now
