@@ -24,27 +24,11 @@ from typing import Any
 import numpy as np
 
 from apc_core.params import ConfigError
-from apc_core.robot import Payload, Robot, RobotModelError, with_payload
+from apc_core.robot import Payload, Robot, with_payload
 from apc_plant_sim.effects import ArmEffects, puma560_effects
 from apc_plant_sim.plant import Plant, PlantConfig
 
 ENGINES = ("pinocchio", "mujoco")
-
-
-def payload_from_values(robot: Robot, values: Mapping[str, Any]) -> Payload:
-    """The ``payload.*`` parameters as a :class:`Payload`; a bad one names its parameter."""
-    try:
-        payload = Payload(
-            mass_kg=values["payload.mass_kg"],
-            com_m=tuple(values["payload.com_m"]),
-            frame=values["payload.frame"] or None,
-        )
-    except RobotModelError as exc:
-        field = "mass_kg" if "mass_kg" in str(exc) else "com_m"
-        raise ConfigError(f"parameter 'payload.{field}': {exc}") from None
-    if payload.frame is not None and not robot.model.existFrame(payload.frame):
-        raise ConfigError(f"parameter 'payload.frame': no frame '{payload.frame}' in the URDF")
-    return payload
 
 
 class EngineSetup:
@@ -75,10 +59,7 @@ class EngineSetup:
         q0: np.ndarray,
         loaded: bool = True,
     ) -> None:
-        try:
-            self.loaded_robot = with_payload(robot, payload)
-        except RobotModelError as exc:
-            raise ConfigError(f"parameter 'payload.frame': {exc}") from None
+        self.loaded_robot = with_payload(robot, payload)
         self.robot = robot
         self.period = period
         self.substeps = max(1, math.ceil(period / max_step - 1e-9))

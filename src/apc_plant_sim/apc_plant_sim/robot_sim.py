@@ -50,7 +50,6 @@ from apc_core.nodeutil import (
     run_node,
 )
 from apc_core.params import ConfigError, Param, declare
-from apc_plant_sim import node as plant_node
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import (
     EFFECT_PRESETS,
@@ -58,10 +57,10 @@ from apc_plant_sim.engines import (
     VELOCITY_SOURCES,
     effects_from_values,
     make_engine,
-    payload_from_values,
 )
 from apc_plant_sim.mujoco_arm import INTEGRATORS
 from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
+from apc_plant_sim.simulated_arm import ARM_PARAMS, payload_from_params
 
 #: Where ros2_control's ``joint_state_broadcaster`` publishes (``use_local_topics: false``).
 JOINT_STATES_TOPIC = "/joint_states"
@@ -75,7 +74,7 @@ _DEFAULTS = DriverConfig()
 #: The arm's start and payload, declared as ``plant_node`` declares them (``payload.at_s`` is
 #: driver time since the first cycle here).
 PLANT_ARM_PARAMS = tuple(
-    p for p in plant_node.PARAMS if p.name == "q_initial_deg" or p.name.startswith("payload.")
+    p for p in ARM_PARAMS if p.name == "q_initial_deg" or p.name.startswith("payload.")
 )
 
 PARAMS: tuple[Param, ...] = (
@@ -224,7 +223,7 @@ class RobotSimNode(Node):
         q0 = values["q_initial_deg"]
         if len(q0) != n:
             raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
-        payload = payload_from_values(robot, values)
+        payload, _ = payload_from_params(robot, values)
         at_s = values["payload.at_s"] if payload.mass_kg > 0.0 else 0.0
         engine_name = values["engine"]
         self.engine = make_engine(

@@ -41,6 +41,29 @@ ARM_PARAMS: tuple[Param, ...] = (
 )
 
 
+def payload_from_params(robot: Robot, values: Mapping[str, Any]) -> tuple[Payload, Robot]:
+    """The ``payload.*`` parameters as a :class:`Payload` and the arm carrying it.
+
+    Raises
+    ------
+    ConfigError
+        Naming the bad ``payload.*`` parameter.
+    """
+    mass, com = values["payload.mass_kg"], tuple(values["payload.com_m"])
+    for name, value in (("payload.mass_kg", {"mass_kg": mass}), ("payload.com_m", {"com_m": com})):
+        try:
+            Payload(**value)
+        except RobotModelError as exc:
+            raise ConfigError(f"parameter '{name}': {exc}") from None
+    payload = Payload(mass_kg=mass, com_m=com, frame=values["payload.frame"] or None)
+    if payload.frame is not None and not robot.model.existFrame(payload.frame):
+        raise ConfigError(f"parameter 'payload.frame': no frame '{payload.frame}' in the URDF")
+    try:
+        return payload, with_payload(robot, payload)
+    except RobotModelError as exc:
+        raise ConfigError(f"parameter 'payload.frame': {exc}") from None
+
+
 class SimulatedArm:
     """The plant and the payload it picks up at sample ``pickup_k`` (0: carried from the start).
 
@@ -61,20 +84,7 @@ class SimulatedArm:
     @classmethod
     def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> SimulatedArm:
         """Build from the node's parameter values (:data:`ARM_PARAMS` and ``period``)."""
-        try:
-            payload = Payload(
-                mass_kg=values["payload.mass_kg"],
-                com_m=tuple(values["payload.com_m"]),
-                frame=values["payload.frame"] or None,
-            )
-        except RobotModelError as exc:  # "payload mass_kg must be ...", "payload com_m ..."
-            raise ConfigError(f"parameter 'payload.{str(exc).split()[1]}': {exc}") from None
-        if payload.frame is not None and not robot.model.existFrame(payload.frame):
-            raise ConfigError(f"parameter 'payload.frame': no frame '{payload.frame}' in the URDF")
-        try:
-            loaded = with_payload(robot, payload)
-        except RobotModelError as exc:
-            raise ConfigError(f"parameter 'payload.frame': {exc}") from None
+        payload, loaded = payload_from_params(robot, values)
         try:
             config = PlantConfig(
                 period=values["period"],
