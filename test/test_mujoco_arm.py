@@ -10,6 +10,7 @@ import pytest
 
 from apc_core.nodeutil import resolve_config_path
 from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_payload
+from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import make_engine
@@ -23,7 +24,7 @@ from apc_plant_sim.mujoco_arm import (
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.reproduce import example_robot_urdf
 from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
-from apc_plant_sim.scenario import build, make_feedback, paper_scenario, recommended_settings
+from apc_plant_sim.scenario import build, paper_scenario, recommended_settings
 
 RNG_STATES = 200
 
@@ -182,9 +183,7 @@ def _track_paper_move(engine_name: str) -> tuple[np.ndarray, np.ndarray]:
     )
     driver = RobotDriver(engine, DriverConfig(state_rate=1.0 / scenario.period))
     feedforward = Feedforward(built.controller_robot.model, built.trajectory, scenario.period)
-    feedback = make_feedback(
-        "adaptive", built.controller_robot, scenario.period, recommended_settings()
-    )
+    feedback = make_law("adaptive", built.controller_robot, scenario.period, recommended_settings())
     feedback.reset()
     applied = None
     q, error = [], []
