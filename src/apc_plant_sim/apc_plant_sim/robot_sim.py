@@ -59,6 +59,7 @@ from apc_plant_sim.engines import (
     make_engine,
 )
 from apc_plant_sim.mujoco_arm import INTEGRATORS
+from apc_plant_sim.node import DERIVED as PLANT_DERIVED
 from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
 from apc_plant_sim.simulated_arm import ARM_PARAMS, payload_from_params
 
@@ -219,7 +220,7 @@ class RobotSimNode(Node):
         n = robot.n_joints
         effects = effects_from_values(values, n)
         config = _driver_config(values, effects)
-        chosen = fill_derived(values, robot, plant_node.DERIVED)
+        chosen = fill_derived(values, robot, PLANT_DERIVED)
         q0 = values["q_initial_deg"]
         if len(q0) != n:
             raise ConfigError(f"parameter 'q_initial_deg': needs {n} values, got {len(q0)}")
