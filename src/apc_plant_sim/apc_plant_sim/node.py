@@ -56,6 +56,7 @@ from apc_core.nodeutil import (
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
+from apc_plant_sim.pacing import StatePacer
 from apc_plant_sim.plant import PlantError
 from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
 
@@ -153,9 +154,9 @@ class PlantNode(Node):
             wire.seconds_to_ns(values["watchdog_s"]),
         )
         self._applied: np.ndarray | None = None
-        self._sent_wall = 0.0
-        self._first_sent_wall = 0.0
-        self._created_wall = time.monotonic()
+        self.pacer = StatePacer(
+            values["resend_s"], values["lockstep_timeout_s"], now=time.monotonic()
+        )
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
@@ -214,9 +215,7 @@ class PlantNode(Node):
             self._fail(f"sample {self.k}: the arm's state cannot be published ({exc})")
             return
         self.js_pub.publish(msg)
-        self._sent_wall = time.monotonic()
-        if not resend:
-            self._first_sent_wall = self._sent_wall
+        self.pacer.sent(time.monotonic(), resend)
 
     @property
     def started(self) -> bool:
@@ -235,7 +234,7 @@ class PlantNode(Node):
             self.diagnostics.count(f"{filed.value}.{topic}")
             return
         if filed is Filed.TAKEN and torque.stamp_ns == self.k * self.period_ns:
-            self.diagnostics.time(f"latency.{topic}", time.monotonic() - self._first_sent_wall)
+            self.diagnostics.time(f"latency.{topic}", self.pacer.waited(time.monotonic()))
         if self.intake.lockstep:
             self._lockstep_try()
 
@@ -254,23 +253,20 @@ class PlantNode(Node):
             return
         if not self.started:
             self._start_when_ready("lockstep")
-            if not self.started and (
-                time.monotonic() - self._created_wall > self._values["lockstep_timeout_s"]
-            ):
+            if not self.started and self.pacer.start_timed_out(time.monotonic()):
                 self._fail(
                     f"lockstep: peers missing after {self._values['lockstep_timeout_s']} s: "
                     f"{self._missing_peers()}"
                 )
             return
         now = time.monotonic()
-        waited = now - self._first_sent_wall
-        if waited > self._values["lockstep_timeout_s"]:
+        if self.pacer.sample_timed_out(now):
             missing = [source.value for source in self.intake.missing(self.k)]
             self._fail(
                 f"lockstep: no {' and no '.join(missing)} for sample {self.k} after "
-                f"{waited:.1f} s; ending the run (is the peer node running?)"
+                f"{self.pacer.waited(now):.1f} s; ending the run (is the peer node running?)"
             )
-        elif now - self._sent_wall > self._values["resend_s"]:
+        elif self.pacer.resend_due(now):
             self.diagnostics.count("resent")
             self._publish_state(resend=True)
 
@@ -339,7 +335,7 @@ class PlantNode(Node):
             return
         tick = self.intake.tick(self.k)
         if tick.action is Action.WAIT:
-            if now - self._first_sent_wall > self._values["resend_s"]:
+            if self.pacer.resend_due(now):
                 self._publish_state()  # sample 0 again, until both controllers answer it
             return
         diag = self.diagnostics
