@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_system_default
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -48,6 +49,17 @@ class Peer:
             wire.CLOCK_QOS,
         )
         self.pub = node.create_publisher(Float64MultiArray, topic, qos_profile_system_default)
+        self.diagnostics: list[dict[str, str]] = []
+        node.create_subscription(
+            DiagnosticArray,
+            "/diagnostics",
+            lambda m: self.diagnostics.extend(
+                {kv.key: kv.value for kv in status.values}
+                for status in m.status
+                if status.hardware_id == "robot_sim"
+            ),
+            wire.DIAGNOSTICS_QOS,
+        )
 
     def command(self, values) -> None:
         self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
@@ -80,7 +92,7 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
     peer = Peer(graph)
     with robot_sim(
         tmp_path,
-        "state_rate:=200.0",
+        "state_rate:=50.0",
         f"state_joints:={STATE_JOINTS}".replace("'", ""),
         "publish_velocity:=false",
         "command_timeout:=0.2",
@@ -98,7 +110,7 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
         # Stamps: the node's clock (system time), spaced 1/state_rate.
         stamps = np.array([wire.stamp_to_ns(m.header.stamp) for _, m in peer.states[-15:]])
         assert abs(stamps[-1] / 1e9 - time.time()) < 2.0
-        assert np.median(np.diff(stamps)) == pytest.approx(5e6, rel=0.2)
+        assert np.median(np.diff(stamps)) == pytest.approx(20e6, rel=0.2)
 
         # A command in command_joints order (URDF order) is applied: it comes back as effort.
         command = [5.0, -40.0, 12.0]
@@ -127,10 +139,23 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
         )
         assert time.monotonic() - t_last >= 0.2
         # A bad command is rejected, never applied.
+        # (Spaced: SystemDefaultsQoS keeps only the newest message with FastDDS, as
+        # forward_command_controller needs.)
         peer.command([1.0, 2.0])
+        graph.spin_for(0.2)
         peer.command([1.0, float("nan"), 3.0])
         graph.spin_for(0.2)
         assert all(v == 0.0 for v in peer.states[-1][1].effort)
+        # /diagnostics counts them (published once a second).
+        graph.spin_until(
+            lambda: peer.diagnostics and int(peer.diagnostics[-1].get("rejected", 0)) >= 2,
+            10,
+            "diagnostics with the rejected commands",
+        )
+        counts = peer.diagnostics[-1]
+        assert int(counts["rejected"]) == 2
+        assert int(counts["commands"]) >= 1 and int(counts["timeouts"]) == 1
+        assert int(counts["clipped"]) == 0
 
 
 @pytest.mark.parametrize(
