@@ -217,3 +217,32 @@ def test_a_stale_state_is_refused_and_changes_nothing():
     with pytest.raises(wire.WireError, match="stale"):
         look.due(20, 2)
     assert _answer(look, 4) == [5]
+
+
+def test_a_restart_drops_plan_and_goals_and_holds_the_position_measured_then(robot):
+    """Robot mode's start: activation, a watchdog recovery, an aborted goal."""
+    target = Q0 + 0.2
+    q = queue(robot, first_goal=target)
+    q.sample(0, Q0, keep)  # the first move under way
+    q.add(goal([0.5], [Q0 - 0.1]))
+    assert q.restart() == 1 and not q.queued
+    elsewhere = Q0 + 0.05
+    out = q.sample(40, elsewhere, keep)
+    assert_array_equal(out.setpoint.q, elsewhere)  # held, the first move not started again
+    assert_array_equal(out.setpoint.qd, np.zeros(3))
+    assert_array_equal(q.sample(200, Q0, keep).setpoint.q, elsewhere)
+    # before any plan (the first activation) the first move is kept
+    fresh = queue(robot, first_goal=target)
+    fresh.restart()
+    assert fresh.first_goal is not None
+
+
+def test_a_restarted_lookahead_answers_the_start_sample_from_its_own_index():
+    la = Lookahead(1)
+    assert la.due(10, 1).samples == range(1, 3)
+    la.sent(Setpoint(1, 0.0, Q0, Q0, Q0, Q0))
+    la.sent(Setpoint(2, 0.0, Q0, Q0, Q0, Q0))
+    la.restart()
+    # the same stamp again is a start, not a resend; set point 1 goes out again
+    due = la.due(10, 1)
+    assert due.resend is None and due.samples == range(1, 3)

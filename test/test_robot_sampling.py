@@ -50,20 +50,30 @@ def test_duplicate_out_of_order_stale_and_future_are_rejected():
     assert s.newest.position[0] == 0.0
 
 
-def test_samples_are_grid_stamped_from_the_newest_state_with_their_age():
+def test_samples_are_grid_stamped_from_the_newest_state_carried_forward_to_the_tick():
     s = _sampler()
     t0 = 1234 * T + 3 * MS  # activation 3 ms into a period
-    s.offer(_state(t0 - 1 * MS, 0.5, 0.1), t0)
+
+    def ramp(t):  # q = 1 + 2 (t - t0) + 5 (t - t0)^2, sent without velocity
+        x = (t - t0) * 1e-9
+        return 1.0 + 2.0 * x + 5.0 * x * x
+
+    s.offer(_state(t0 - 2 * MS, ramp(t0 - 2 * MS)), t0)
+    s.offer(_state(t0 - 1 * MS, ramp(t0 - 1 * MS)), t0)
     k0 = s.start(t0)
     assert k0 == 1234
-    take = s.tick(t0)
+    take = s.tick(t0)  # two states: carried forward by their slope to t0
     assert take.k == 1234 and take.sample.stamp_ns == 1234 * T
     assert take.age_ns == 1 * MS and take.missed == 0 and take.reason == ""
-    # two states within the next period: the newer one is taken
-    s.offer(_state(t0 + 4 * MS, 0.6, 0.2), t0 + 4 * MS)
-    s.offer(_state(t0 + 8 * MS, 0.7, 0.3), t0 + 8 * MS)
-    take = s.tick(t0 + T + 1 * MS)  # timer 1 ms late: still sample k0 + 1
-    assert take.k == k0 + 1 and take.sample.position[0] == 0.7 and take.age_ns == 3 * MS
+    slope = (ramp(t0 - MS) - ramp(t0 - 2 * MS)) / 1e-3
+    assert take.sample.position[0] == pytest.approx(ramp(t0 - MS) + 1e-3 * slope)
+    # two states within the next period: the newer one is taken, carried forward exactly
+    s.offer(_state(t0 + 4 * MS, ramp(t0 + 4 * MS)), t0 + 4 * MS)
+    s.offer(_state(t0 + 8 * MS, ramp(t0 + 8 * MS)), t0 + 8 * MS)
+    take = s.tick(t0 + T + 1 * MS)  # timer 1 ms late: still sample k0 + 1, at its own time
+    assert take.k == k0 + 1 and take.age_ns == 3 * MS and take.late_ns == 1 * MS
+    assert take.sample.position[0] == pytest.approx(ramp(t0 + T))
+    assert take.sample.velocity[0] == pytest.approx(2.0 + 10.0 * 0.010)
 
 
 def test_no_new_state_stale_and_missed_ticks_leave_gaps():

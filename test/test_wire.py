@@ -67,7 +67,7 @@ def test_topic_names_are_relative_except_clock_and_diagnostics():
 
 def test_topic_table_has_every_topic_with_its_type_and_qos():
     table = {spec.name: spec for spec in wire.TOPICS}
-    assert len(table) == len(wire.TOPICS) == 8
+    assert len(table) == len(wire.TOPICS) == 9
     expected = {
         wire.JOINT_STATES: (JointState, wire.CONTROL_QOS),
         wire.SETPOINT: (JointTrajectory, wire.CONTROL_QOS),
@@ -75,6 +75,7 @@ def test_topic_table_has_every_topic_with_its_type_and_qos():
         wire.FEEDBACK_TORQUE: (JointState, wire.CONTROL_QOS),
         wire.ESTIMATE: (Float64MultiArray, wire.CONTROL_QOS),
         wire.TRAJECTORY_GOAL: (JointTrajectory, wire.TRAJECTORY_GOAL_QOS),
+        wire.SAMPLE: (JointState, wire.CONTROL_QOS),
         wire.CLOCK: (Clock, wire.CLOCK_QOS),
         wire.DIAGNOSTICS: (DiagnosticArray, wire.DIAGNOSTICS_QOS),
     }

@@ -22,6 +22,7 @@ setup(
     entry_points={
         "console_scripts": [
             "feedback_node = apc_feedback.node:main",
+            "robot_node = apc_feedback.robot_node:main",
         ],
     },
 )

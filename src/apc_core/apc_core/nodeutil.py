@@ -36,10 +36,12 @@ from rclpy.node import Node
 from apc_core.defaults import derive
 from apc_core.params import ConfigError, Param
 from apc_core.robot import (
+    EXAMPLE_ROBOT_DATA,
     PAPER_GRAVITY_M_S2,
     PAPER_PERIOD_S,
     Robot,
     RobotModelError,
+    example_robot_urdf,
     load_robot,
     read_urdf,
     with_inertia_error,
@@ -59,8 +61,9 @@ ROBOT_PARAMS: tuple[Param, ...] = (
     Param(
         "robot_description_path",
         "puma560_3dof.urdf",
-        "URDF file: absolute, relative to the working directory, or a file name in apc's "
-        "config directory (share/apc_core/config in a ROS install)",
+        "URDF file: absolute, relative to the working directory, a file name in apc's config "
+        "directory (share/apc_core/config in a ROS install), or example-robot-data/<path> "
+        "(e.g. example-robot-data/panda_description/urdf/panda.urdf)",
     ),
     Param("gravity", PAPER_GRAVITY_M_S2, "gravity along -z of the base frame (m/s^2)", 0.0, 100.0),
     Param(
@@ -105,7 +108,13 @@ def config_dirs() -> list[Path]:
 
 
 def resolve_config_path(name: str) -> Path:
-    """Find a config file by absolute path, path relative to the cwd, or name in config dirs."""
+    """Find a config file by absolute path, path relative to the cwd, name in config dirs, or
+    ``example-robot-data/<path under its robots/>`` (a URDF of that wheel)."""
+    if name.startswith(EXAMPLE_ROBOT_DATA):
+        try:
+            return example_robot_urdf(name[len(EXAMPLE_ROBOT_DATA) :])
+        except FileNotFoundError:
+            return Path(name)
     path = Path(os.path.expanduser(name))
     if path.is_absolute() or path.exists():
         return path

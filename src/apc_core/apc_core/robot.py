@@ -17,7 +17,9 @@ Conventions
 
 from __future__ import annotations
 
+import glob
 import math
+import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -330,6 +332,19 @@ def with_inertia_error(robot: Robot, relative_error: Sequence[float]) -> Robot:
             body.mass, body.lever.copy(), body.inertia * (1.0 + err[i])
         )
     return _derived(robot, model)
+
+
+#: ``robot_description_path`` prefix of a URDF from the ``example-robot-data`` wheel.
+EXAMPLE_ROBOT_DATA = "example-robot-data/"
+
+
+def example_robot_urdf(relative: str) -> Path:
+    """A URDF shipped by the ``example-robot-data`` wheel (installed under sys.prefix), by its
+    path under the wheel's ``robots/`` (``panda_description/urdf/panda.urdf``)."""
+    hits = glob.glob(f"{sys.prefix}/**/example-robot-data/robots/{relative}", recursive=True)
+    if not hits:
+        raise FileNotFoundError(f"example-robot-data does not ship {relative} here")
+    return Path(hits[0])
 
 
 def alternating_error(n: int, magnitude: float = 0.1) -> np.ndarray:

@@ -69,10 +69,16 @@ class CommandMap:
         The command's order (the forward_command_controller's ``joints``): the same joints.
     effort_limit : (n,) array
         Per-joint bound in model order (the URDF's ``<limit effort>``).
+    count : callable
+        ``count("clipped.<joint>")`` for each joint clipped.
     """
 
     def __init__(
-        self, model_joints: Sequence[str], command_joints: Sequence[str], effort_limit: np.ndarray
+        self,
+        model_joints: Sequence[str],
+        command_joints: Sequence[str],
+        effort_limit: np.ndarray,
+        count: Callable[[str], object] = lambda name: None,
     ) -> None:
         model, command = list(model_joints), list(command_joints)
         if sorted(model) != sorted(command) or len(set(command)) != len(command):
@@ -83,15 +89,16 @@ class CommandMap:
         self.joints = tuple(command)
         self.order = np.array([model.index(name) for name in command])
         self.limit = np.asarray(effort_limit, dtype=float)[self.order]
-        self.clipped = dict.fromkeys(command, 0)
+        self._clipped = tuple(f"clipped.{name}" for name in command)
+        self._count = count
 
     def __call__(self, torque: np.ndarray) -> np.ndarray:
-        """The command row (a new array); counts each joint clipped in :attr:`clipped`."""
+        """The command row (a new array), each joint clipped counted."""
         row = torque[self.order]
         over = np.abs(row) > self.limit
         if over.any():
             for i in np.flatnonzero(over):
-                self.clipped[self.joints[i]] += 1
+                self._count(self._clipped[i])
             np.clip(row, -self.limit, self.limit, out=row)
         return row
 
@@ -161,7 +168,8 @@ class RobotLoop:
         self._pending: JointSample | None = None  # sample waiting for its set point
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self._taken_stamp: int | None = None  # stamp of the newest sample taken
-        self.last_age_ns = -1
+        self.last_age_ns = -1  # age of the state the last tick sampled (-1: none)
+        self.last_late_ns = 0  # how late the last tick was after its sample's time
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> str:
@@ -197,7 +205,7 @@ class RobotLoop:
             self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
             return Step(command=self._hold_command())
         take = self.sampler.tick(now_ns)
-        self.last_age_ns = take.age_ns
+        self.last_age_ns, self.last_late_ns = take.age_ns, take.late_ns
         if take.missed:
             self.count("missed_ticks")
         if self._pending is not None:
@@ -277,17 +285,25 @@ class RobotLoop:
         k = sample.stamp_ns // self.period_ns
         sent = self._sent
         applied = sent[1] if sent is not None and sent[0] == k - 1 else None
-        out = self.law.update(
-            k,
-            sample.position,
-            sample.velocity,
-            setpoint.q,
-            setpoint.qd,
-            setpoint.qdd,
-            setpoint.u_n,
-            applied,
-        )
-        row = self.command(setpoint.u_n + out.du)
+        try:
+            out = self.law.update(
+                k,
+                sample.position,
+                sample.velocity,
+                setpoint.q,
+                setpoint.qd,
+                setpoint.qdd,
+                setpoint.u_n,
+                applied,
+            )
+            total = setpoint.u_n + out.du
+            if not np.isfinite(total).all():
+                raise ValueError(f"u_n + du is not finite at sample {k}")
+        except ValueError as exc:  # FeedbackError is one: no command, the last one stands
+            self.count("feedback_law_errors")
+            self.log("error", f"sample {k}: {exc}; no command")
+            return NOTHING
+        row = self.command(total)
         self._sent = (k, self.command.to_model(row))
         self.count("commands")
         if out.skipped:

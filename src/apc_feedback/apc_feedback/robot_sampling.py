@@ -6,6 +6,16 @@ clock at its own rate. Here sample ``k`` is *taken* by the controllers' timer, a
 on apc's grid in absolute time, so the feedforward and the feedback law see the same sample
 indices as with apc's plant. Everything is told times in nanoseconds, never reads a clock.
 
+The sample is the newest state carried to the sample's time ``kT + phase`` (the tick's
+nominal time): ``q + v a + acc a^2 / 2`` and ``v + acc a`` over ``a`` = that time minus the
+state's stamp (velocity and acceleration from the parabola below; with fewer than three
+states, ``q + v a``). Samples are then exactly T apart whatever the driver's rate and phase
+and the timer's jitter, which Eq. 16 assumes: measured with the loop closed around apc's
+plant (``test/test_robot_loop.py``), the newest state as it is lets the adaptive law diverge
+with a 333 Hz driver (samples 9 or 12 ms apart), carried forward it holds within 0.2 deg; and
+over DDS a late tick followed by a punctual one (two samples 1.4 ms apart, stamped T apart)
+made it diverge at activation.
+
 Rules (each counted by the caller under the reason's name):
 
 - ``duplicate``: a state with the stamp of the newest accepted one (the first one stands);
@@ -42,59 +52,76 @@ from typing import NamedTuple
 
 import numpy as np
 
+from apc_core.params import SettingError, check_settings, setting
+from apc_core.robot import PAPER_PERIOD_S
 from apc_core.wire import JointSample, seconds_to_ns
 
 
-class RobotSamplingError(ValueError):
-    """A bad robot-sampling setting; the message starts with the field name."""
+class RobotSamplingError(SettingError):
+    """A bad robot-sampling setting; ``field`` names it."""
 
 
 @dataclass(frozen=True)
 class RobotSamplingConfig:
-    """Timing rules of robot mode (seconds).
+    """Timing rules of robot mode (seconds); the node's parameters are made from the settings.
 
     Attributes
     ----------
     period : float
         Sample period T.
-    max_age : float
-        Oldest joint state a sample may be taken from (and that is accepted at all).
-    watchdog : float
-        No accepted joint state this long -> the watchdog fault (``>= max_age``).
-    velocity_window : float
-        Span of the velocity estimate from positions (0: the last three states).
+    max_age, watchdog, velocity_window :
+        See their descriptions; ``watchdog >= max_age``.
     """
 
-    period: float = 0.010
-    max_age: float = 0.02
-    watchdog: float = 0.1
-    velocity_window: float = 0.0
+    period: float = PAPER_PERIOD_S
+    max_age: float = setting(
+        0.02,
+        "oldest joint state (s, by its stamp) accepted and sampled; older is stale",
+        1e-4,
+        10.0,
+    )
+    watchdog: float = setting(
+        0.1,
+        "no fresh joint state this long (s) -> hold against gravity once, then silence",
+        1e-4,
+        60.0,
+    )
+    velocity_window: float = setting(
+        0.0,
+        "span (s) of the velocity estimate when the driver sends none (0: last three states)",
+        0.0,
+        1.0,
+    )
 
     def __post_init__(self) -> None:
-        for name in ("period", "max_age", "watchdog"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise RobotSamplingError(f"{name} must be > 0 s, got {value}")
-        if not (math.isfinite(self.velocity_window) and self.velocity_window >= 0.0):
-            raise RobotSamplingError(f"velocity_window must be >= 0 s, got {self.velocity_window}")
+        check_settings(self, RobotSamplingError)
+        if not (math.isfinite(self.period) and self.period > 0.0):
+            raise RobotSamplingError(f"period must be > 0 s, got {self.period}", field="period")
         if self.watchdog < self.max_age:
             raise RobotSamplingError(
-                f"watchdog must be >= max_age ({self.max_age} s), got {self.watchdog}"
+                f"watchdog must be >= max_age ({self.max_age} s), got {self.watchdog}",
+                field="watchdog",
             )
 
 
 class VelocityEstimator:
-    """Velocity from positions: a parabola over ``window_ns`` (see the module docstring)."""
+    """Velocity from positions: a parabola over ``window_ns`` (see the module docstring).
+
+    :attr:`acceleration` is the parabola's (None before three states).
+    """
 
     def __init__(self, window_ns: int) -> None:
         self.window_ns = int(window_ns)
         self._history: deque[tuple[int, np.ndarray]] = deque()
+        self.acceleration: np.ndarray | None = None
 
     def reset(self) -> None:
         self._history.clear()
+        self.acceleration = None
 
     def update(self, stamp_ns: int, position: np.ndarray) -> np.ndarray | None:
         """Add a state (stamps strictly increasing); its velocity, None for the first."""
+        self.acceleration = None
         history = self._history
         history.append((stamp_ns, position))
         # Keep one state at least a window old (the base) and everything after it.
@@ -110,6 +137,7 @@ class VelocityEstimator:
         middle = (t2 + stamp_ns) / 2
         t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
         a, b = (stamp_ns - t1) * 1e-9, (stamp_ns - t2) * 1e-9
+        self.acceleration = 2.0 * (position / (a * b) - q1 / (a * (b - a)) + q2 / (b * (b - a)))
         return position * (a + b) / (a * b) - q1 * b / (a * (b - a)) + q2 * a / (b * (b - a))
 
 
@@ -121,10 +149,13 @@ class Take(NamedTuple):
     k : int
         Index of this tick's sample (stamp ``kT``).
     sample : JointSample or None
-        The sample, stamped ``kT`` (position, velocity, the driver's effort or None); None if
-        none was taken (``reason`` says why).
+        The sample, stamped ``kT``: position and velocity carried forward to the tick, the
+        driver's effort (or None); None if none was taken (``reason`` says why).
     age_ns : int
-        Age of the joint state the sample is (or would be) taken from; -1 without one.
+        Age at the tick of the joint state the sample is (or would be) taken from; -1
+        without one.
+    late_ns : int
+        How late the tick is after the sample's nominal time ``kT + phase``.
     reason : str
         Why no sample was taken (``no_new_state``, ``stale``, ``no_state``), else "".
     missed : int
@@ -136,6 +167,7 @@ class Take(NamedTuple):
     age_ns: int
     reason: str
     missed: int
+    late_ns: int = 0
 
 
 class RobotSampler:
@@ -153,6 +185,7 @@ class RobotSampler:
         self.watchdog_ns = seconds_to_ns(config.watchdog)
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
+        self._acceleration: np.ndarray | None = None  # of the newest state, when known
         self._taken_stamp: int | None = None  # driver stamp of the last sample's state
         self._phase_ns = 0
         self._last_k: int | None = None
@@ -169,6 +202,7 @@ class RobotSampler:
             return "future"
         assert state.position is not None
         velocity = self.velocity.update(stamp, state.position)
+        self._acceleration = self.velocity.acceleration
         if state.velocity is not None:
             velocity = state.velocity
         self.newest = JointSample(stamp, state.position, velocity, state.effort)
@@ -181,9 +215,9 @@ class RobotSampler:
     def start(self, now_ns: int) -> int:
         """Start sampling at this tick: its sample is ``k = floor(now / T)``; returns it.
 
-        The ticks' phase within the period is fixed here, so a timer jittering by less than
-        ``T / 2`` keeps consecutive indices; the samples after a re-start all come after the
-        ones before it.
+        The ticks' phase within the period is fixed here, so a timer late by less than ``T``
+        keeps consecutive indices; the samples after a re-start all come after the ones
+        before it.
         """
         k = now_ns // self.period_ns
         if self._last_k is not None and k <= self._last_k:
@@ -193,9 +227,12 @@ class RobotSampler:
         return k
 
     def tick(self, now_ns: int) -> Take:
-        """Take sample ``k`` (the one due at ``now``) from the newest joint state."""
+        """Take sample ``k`` (the one due at ``now``): the newest joint state carried forward
+        to ``now``."""
         assert self._last_k is not None, "start() first"
-        k = max(round((now_ns - self._phase_ns) / self.period_ns), self._last_k + 1)
+        # Floor: a timer is late, never early; a tick up to T late keeps its index (rounding
+        # would name a late tick after the next sample, and every later one a sample ahead).
+        k = max((now_ns - self._phase_ns) // self.period_ns, self._last_k + 1)
         missed = k - self._last_k - 1
         self._last_k = k
         newest = self.newest
@@ -209,5 +246,15 @@ class RobotSampler:
         if newest.velocity is None:  # a single position without velocity: nothing to difference
             return Take(k, None, age, "no_velocity", missed)
         self._taken_stamp = newest.stamp_ns
-        sample = JointSample(k * self.period_ns, newest.position, newest.velocity, newest.effort)
-        return Take(k, sample, age, "", missed)
+        # Carried to the sample's own time kT + phase, not to ``now``: a late tick and the
+        # one after it still give samples T apart.
+        position, velocity = newest.position, newest.velocity
+        a = (k * self.period_ns + self._phase_ns - newest.stamp_ns) * 1e-9
+        acceleration = self._acceleration
+        if acceleration is None:
+            position = position + a * velocity
+        else:
+            position = position + a * velocity + (0.5 * a * a) * acceleration
+            velocity = velocity + a * acceleration
+        sample = JointSample(k * self.period_ns, position, velocity, newest.effort)
+        return Take(k, sample, age, "", missed, now_ns - k * self.period_ns - self._phase_ns)

@@ -197,6 +197,18 @@ class GoalQueue:
                     f"{wire.DEFAULT_MAX_ABS:g}); the goal is too fast for its distance"
                 )
 
+    def restart(self) -> int:
+        """Drop the plan and the queued goals (robot mode's start: activation, a watchdog
+        recovery, an aborted goal); the next sample holds its measured position. The first move
+        is only ever the first plan. Returns how many queued goals were dropped."""
+        dropped = len(self.queued)
+        self.queued.clear()
+        if self.feedforward is not None:
+            self.first_goal = None
+        self.feedforward = None
+        self._last_q = None
+        return dropped
+
     # -- samples --------------------------------------------------------------------------------
     def sample(self, k: int, position: np.ndarray, render: Callable[[Setpoint], R]) -> Sampled[R]:
         """Set point ``k`` rendered for the wire by ``render`` (which raises ValueError for a
@@ -292,6 +304,12 @@ class Lookahead:
         self._last_stamp = stamp_ns
         first = k if self._next_k is None else max(self._next_k, k)
         return Due(range(first, k + self.lookahead + 1))
+
+    def restart(self) -> None:
+        """Forget every joint state handled: the next one is answered from its own sample on
+        (robot mode's start, see :meth:`GoalQueue.restart`)."""
+        self._last_stamp, self._next_k = None, None
+        self._sent = {}
 
     def sent(self, sp: Setpoint) -> None:
         """Set point ``sp`` went out."""

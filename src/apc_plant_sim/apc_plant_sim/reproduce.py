@@ -22,7 +22,6 @@ Writes ``<out>/<timestamp>/`` with the recordings, ``report.md``, PNG figures an
 from __future__ import annotations
 
 import argparse
-import glob
 import json
 import sys
 import time
@@ -31,6 +30,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from apc_core.robot import example_robot_urdf
 from apc_plant_sim.analyze import analyze_file
 from apc_plant_sim.experiment import Progress, RunSpec, run_in_process
 from apc_plant_sim.scenario import (
@@ -67,14 +67,6 @@ def controllers(alphas: Sequence[float], presets: Sequence[str]) -> list[tuple[s
             tag = "P1" if alpha == 1500.0 else "P2" if alpha == 1.5e5 else f"alpha={alpha:g}"
             out.append((f"adaptive {preset} {tag}(0)", "adaptive", makers[preset](alpha)))
     return out
-
-
-def example_robot_urdf(relative: str) -> Path:
-    """A URDF shipped by the ``example-robot-data`` wheel (installed under sys.prefix)."""
-    hits = glob.glob(f"{sys.prefix}/**/example-robot-data/robots/{relative}", recursive=True)
-    if not hits:
-        raise FileNotFoundError(f"example-robot-data does not ship {relative} here")
-    return Path(hits[0])
 
 
 def plan(quick: bool = False, only: Sequence[str] = GROUPS) -> list[Planned]:

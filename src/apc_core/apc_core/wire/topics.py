@@ -27,6 +27,13 @@ FEEDBACK_TORQUE = "feedback/torque"
 ESTIMATE = "feedback/estimate"
 #: user -> feedforward: a new goal (waypoints) to plan and run.
 TRAJECTORY_GOAL = "feedforward/trajectory"
+#: robot mode, robot_node -> feedforward: the sample k it took from a driver's joint states,
+#: stamped ``kT`` (JointState: position, velocity), in place of the plant's ``joint_states``.
+SAMPLE = "feedback/sample"
+#: ``header.frame_id`` of a robot-mode sample that (re)starts the plan (activation, a watchdog
+#: recovery, a goal aborted): the feedforward drops its plan and queued goals and holds the
+#: sample's position; the set point answering it carries the same ``frame_id``.
+START_FRAME = "apc/start"
 #: plant -> all: simulation time in lockstep mode (absolute: there is one clock per ROS graph).
 CLOCK = "/clock"
 #: every node -> monitors: loop timing, late/missing inputs, rejected messages, RLS health.
@@ -110,6 +117,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec(FEEDBACK_TORQUE, JointState, CONTROL_QOS),
     TopicSpec(ESTIMATE, Float64MultiArray, CONTROL_QOS),
     TopicSpec(TRAJECTORY_GOAL, JointTrajectory, TRAJECTORY_GOAL_QOS),
+    TopicSpec(SAMPLE, JointState, CONTROL_QOS),
     TopicSpec(CLOCK, Clock, CLOCK_QOS),
     TopicSpec(DIAGNOSTICS, DiagnosticArray, DIAGNOSTICS_QOS),
 )

@@ -1,0 +1,333 @@
+"""``robot_node``: apc's controllers commanding a ros2_control robot, as a managed node.
+
+    robot_node --ros-args --params-file config/puma560_3dof_robot.yaml   # then configure/activate
+    robot_node --autostart --ros-args ...                                # configured and active
+
+A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``deactivate``,
+``cleanup``, ``shutdown``; the ``lifecycle_msgs`` services ``~/change_state`` and
+``~/get_state``):
+
+- ``configure`` loads the model, checks every parameter (a bad one fails the transition with
+  one line naming it) and subscribes ``/joint_states`` (a driver's, any rate and joint order,
+  extra joints ignored, velocity estimated when empty);
+- ``activate`` starts the sample clock: every T (the node clock: ``use_sim_time`` is honoured)
+  sample k is taken from the newest joint state, stamped kT, and sent on ``feedback/sample``
+  to the feedforward (``feedforward_node`` with ``mode: robot``), which answers with set point
+  k + lookahead on ``feedforward/setpoint``. The first sample holds the measured position, goals
+  on ``feedforward/trajectory`` are then tracked from it. The command ``u_n(k) + du(k)`` goes out
+  as ``std_msgs/Float64MultiArray`` on ``command_topic`` in ``command_joints`` order, clipped to
+  the URDF's effort limits, with the QoS forward_command_controller subscribes with
+  (``SystemDefaultsQoS``);
+- ``deactivate`` sends one command holding the arm against gravity at the measured position
+  (the controller's model) and then none: forward_command_controller keeps applying the last
+  command it got, and an inactive controller must leave the joints to whoever takes them over;
+- ``cleanup`` drops the model and the subscriptions, ``shutdown`` does the same from any state
+  (sending the gravity hold first if active).
+
+Faults (counted and on ``/diagnostics``): no fresh joint state within ``watchdog`` -> the
+gravity hold once, then silence until states return (then a fresh hold at the measured
+position); tracking error beyond ``path_tolerance`` while a goal moves -> the goal is aborted
+and the measured position held. See :mod:`apc_feedback.robot_loop` for why.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import QoSPresetProfiles
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+from apc_core import wire
+from apc_core.nodeutil import (
+    CONTROLLER_ROBOT_PARAMS,
+    Diagnostics,
+    DiagnosticsPublisher,
+    Stopwatch,
+    controller_robot_from_params,
+    guarded,
+    print_help,
+    reject,
+    run_nodes,
+)
+from apc_core.params import ConfigError, Param, declare, params_from
+from apc_feedback.laws import LAW_PARAMS, LawParameters
+from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
+from apc_feedback.robot_sampling import RobotSamplingConfig, RobotSamplingError
+
+AUTOSTART_FLAG = "--autostart"
+
+PARAMS: tuple[Param, ...] = (
+    *CONTROLLER_ROBOT_PARAMS,
+    # The law's parameters, all read at configure (none changes while active).
+    *(replace(p, read_only=True) for p in LAW_PARAMS),
+    Param(
+        "command_topic",
+        "/effort_controller/commands",
+        "where the total torque goes (std_msgs/Float64MultiArray): an effort "
+        "forward_command_controller's ~/commands",
+    ),
+    Param(
+        "command_joints",
+        [],
+        "joint order of the command (the controller's 'joints'); empty = the URDF's order",
+        array_of=str,
+    ),
+    *params_from(RobotSamplingConfig, ""),
+    Param(
+        "path_tolerance",
+        [],
+        "largest |q - q_d| (rad) while a goal moves, one per joint or one for all; beyond it "
+        "the goal is aborted and the measured position held; empty or 0 = no check",
+    ),
+    Param("autostart", False, "configure and activate at start (also: --autostart)"),
+)
+
+
+def _per_joint(name: str, values: list[float], n: int) -> np.ndarray:
+    if not values:
+        return np.zeros(n)
+    if len(values) not in (1, n):
+        raise ConfigError(f"parameter '{name}': needs 1 or {n} values, got {len(values)}")
+    array = np.broadcast_to(np.asarray(values, dtype=float), (n,)).copy()
+    if not (np.isfinite(array).all() and (array >= 0.0).all()):
+        raise ConfigError(f"parameter '{name}': values must be finite and >= 0, got {values}")
+    return array
+
+
+class RobotNode(LifecycleNode):
+    """The commanding node of robot mode (see module docstring)."""
+
+    def __init__(self, node_name: str = "robot_node", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self._declared = declare(self, PARAMS)
+        self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self.diagnostics.message = "unconfigured"
+        DiagnosticsPublisher(self, self.diagnostics)
+        self.loop: RobotLoop | None = None
+        self._timer: Any = None
+        self._entities: list[Any] = []
+        self.configure_error = ""
+        if self._declared["autostart"]:
+            self.trigger_configure()
+            if self.configure_error:
+                raise ConfigError(self.configure_error)
+            self.trigger_activate()
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self._configure()
+        except ValueError as exc:  # ConfigError; a model or wire error
+            self.configure_error = str(exc)
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self.configure_error = ""
+        self.diagnostics.message = "inactive"
+        return TransitionCallbackReturn.SUCCESS
+
+    def _configure(self) -> None:
+        values = self._declared
+        robot = controller_robot_from_params(values)
+        n = robot.n_joints
+        law = LawParameters(values, robot).law
+        try:
+            sampling = RobotSamplingConfig(
+                period=values["period"],
+                **{f: values[f] for f in ("max_age", "watchdog", "velocity_window")},
+            )
+        except RobotSamplingError as exc:
+            raise ConfigError(f"parameter '{exc.field}': {exc}") from None
+        command_joints = values["command_joints"] or list(robot.joint_names)
+        diag = self.diagnostics
+        try:
+            command = CommandMap(robot.joint_names, command_joints, robot.effort_limit, diag.count)
+        except ValueError as exc:
+            raise ConfigError(f"parameter 'command_joints': {exc}") from None
+        topic = values["command_topic"]
+        if not topic.startswith("/"):
+            raise ConfigError(f"parameter 'command_topic': must be absolute, got {topic!r}")
+        model = robot.model
+        data = model.createData()
+        self.joint_names = robot.joint_names
+        self.loop = RobotLoop(
+            law=law,
+            sampling=sampling,
+            command=command,
+            gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
+            path_tolerance=_per_joint("path_tolerance", values["path_tolerance"], n),
+            count=diag.count,
+            log=self._log,
+        )
+        self._sample_msg = JointState()
+        self._command_msg = Float64MultiArray()
+        qos = wire.CONTROL_QOS
+        self.command_pub = self.create_publisher(
+            Float64MultiArray, topic, QoSPresetProfiles.SYSTEM_DEFAULT.value
+        )
+        self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, qos)
+        # Best effort matches a driver's reliable and best-effort publishers alike; only the
+        # newest state is ever used.
+        states = self.create_subscription(
+            JointState,
+            wire.JOINT_STATES,
+            guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
+            QoSPresetProfiles.SENSOR_DATA.value,
+        )
+        setpoints = self.create_subscription(
+            JointTrajectory,
+            wire.SETPOINT,
+            guarded(self, diag, wire.SETPOINT, self._on_setpoint),
+            qos,
+        )
+        self._entities = [self.command_pub, self.sample_pub, states, setpoints]
+        self.get_logger().info(
+            f"configured: {n} joints, T = {values['period']} s, command on '{topic}' in "
+            f"order {list(command_joints)}"
+        )
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self.loop is not None
+        self.loop.activate(self._now())
+        self._timer = self.create_timer(
+            self.loop.sampling.period, guarded(self, self.diagnostics, "tick", self._on_tick)
+        )
+        self.diagnostics.message = "active"
+        self.get_logger().info("active: holding the measured position until a goal arrives")
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop("inactive")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        self.diagnostics.message = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.loop is not None and self.loop.active:
+            self._stop("finalized")
+        self._release()
+        self.diagnostics.message = "finalized"
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop(self, message: str) -> None:
+        """Cancel the timer and send the gravity hold once (see the module docstring)."""
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+        assert self.loop is not None
+        self._publish(Step(command=self.loop.deactivate()))
+        self.diagnostics.message = message
+        self.diagnostics.level = DiagnosticStatus.OK
+        self.get_logger().info(f"{message}: sent the gravity hold, commanding nothing more")
+
+    def _release(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+        for entity in self._entities:
+            if hasattr(entity, "publish"):
+                self.destroy_publisher(entity)
+            else:
+                self.destroy_subscription(entity)
+        self._entities = []
+        self.loop = None
+
+    # -- loop -----------------------------------------------------------------------------------
+    def _now(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _log(self, level: str, text: str) -> None:
+        getattr(self.get_logger(), level)(text, throttle_duration_sec=1.0)
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        loop = self.loop
+        if loop is None:
+            return
+        try:
+            sample = wire.joint_state_to_arrays(
+                msg, self.joint_names, require=("position",), allow_extra=True
+            )
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+            return
+        reason = loop.on_joint_state(sample, self._now())
+        if reason:
+            self.diagnostics.count(reason)
+            reject(self, self.diagnostics, wire.JOINT_STATES, wire.WireError(f"{reason} state"))
+
+    def _on_setpoint(self, msg: JointTrajectory) -> None:
+        loop = self.loop
+        if loop is None or not loop.active:
+            return
+        try:
+            setpoint = wire.msg_to_setpoint(msg, self.joint_names)
+        except wire.WireError as exc:
+            reject(self, self.diagnostics, wire.SETPOINT, exc)
+            return
+        with Stopwatch(self.diagnostics, "compute"):
+            step = loop.on_setpoint(setpoint, msg.header.frame_id == wire.START_FRAME)
+        self._publish(step)
+
+    def _on_tick(self) -> None:
+        loop = self.loop
+        if loop is None or not loop.active:
+            return
+        with Stopwatch(self.diagnostics, "compute"):
+            step = loop.tick(self._now())
+        self._publish(step)
+        diag = self.diagnostics
+        if loop.last_age_ns >= 0:
+            diag.time("state_age", loop.last_age_ns * 1e-9)
+            diag.time("tick_late", loop.last_late_ns * 1e-9)
+        diag.level = DiagnosticStatus.ERROR if loop.faulted else DiagnosticStatus.OK
+        diag.message = "watchdog: no fresh joint state" if loop.faulted else "active"
+
+    def _publish(self, step: Step) -> None:
+        # The command first: the driver waits for it, the feedforward is a sample ahead.
+        if step.command is not None:
+            self._command_msg.data = step.command.tolist()
+            self.command_pub.publish(self._command_msg)
+        sample = step.sample
+        if sample is not None:
+            msg = wire.arrays_to_joint_state(
+                sample.stamp_ns,
+                self.joint_names,
+                sample.position,
+                sample.velocity,
+                msg=self._sample_msg,
+            )
+            msg.header.frame_id = wire.START_FRAME if step.start else ""
+            self.sample_pub.publish(msg)
+
+
+def _help() -> None:
+    print_help("robot_node", __doc__ or "", PARAMS)
+
+
+def main(args: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if args is None else args)
+    user = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
+    overrides = []
+    if AUTOSTART_FLAG in user:
+        argv.remove(AUTOSTART_FLAG)
+        overrides = ["--ros-args", "-p", "autostart:=true"]
+    return run_nodes(
+        lambda: [RobotNode(cli_args=overrides or None)],
+        prog="robot_node",
+        print_help=_help,
+        args=argv,
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())
