@@ -9,11 +9,12 @@ import pinocchio as pin
 import pytest
 
 from apc_core.nodeutil import resolve_config_path
+from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_payload
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
-from apc_plant_sim.effects import ArmEffects
-from apc_plant_sim.engines import make_engine
+from apc_plant_sim.effects import ArmEffects, puma560_effects
+from apc_plant_sim.engines import PANDA_FRICTION_PHI1_NM, effects_from_values, make_engine
 from apc_plant_sim.mujoco_arm import (
     MIN_MASS_KG,
     JointEffects,
@@ -242,3 +243,71 @@ def test_joint_effects_enter_mujocos_model():
     # plane: no gravity on it).
     engine.advance(np.array([3.0, 0.0, 0.0]), 0.01)
     assert abs(engine.qd[0]) < 1e-3
+
+
+def _effect_values(**overrides) -> dict:
+    values = {
+        "effects": "ideal",
+        "damping": [],
+        "frictionloss": [],
+        "armature": [],
+        "encoder_counts_per_rev": [],
+        "velocity_source": "",
+        "velocity_noise": -1.0,
+        "command_delay_cycles": -1,
+        "seed": 0,
+    }
+    values.update(overrides)
+    return values
+
+
+def test_effect_presets_and_overrides():
+    assert effects_from_values(_effect_values(), 3) == ArmEffects()
+    puma = effects_from_values(_effect_values(effects="puma560"), 3)
+    data = puma560_effects()
+    assert puma.viscous_nm_s == data.viscous_nm_s and puma.armature_kgm2 == data.armature_kgm2
+    np.testing.assert_allclose(
+        puma.coulomb_pos_nm, 0.5 * (np.array(data.coulomb_pos_nm) + data.coulomb_neg_nm)
+    )
+    assert puma.velocity == "difference" and puma.command_delay == 1
+    np.testing.assert_allclose(puma.armature_kgm2, [0.784, 2.325, 0.577], atol=1e-3)
+    panda = effects_from_values(_effect_values(effects="panda"), 7)
+    np.testing.assert_allclose(panda.coulomb_pos_nm, np.array(PANDA_FRICTION_PHI1_NM) / 2)
+    assert panda.command_delay == 1 and not panda.viscous_nm_s
+    mixed = effects_from_values(
+        _effect_values(
+            effects="puma560",
+            damping=[1.0, 2.0, 3.0],
+            velocity_source="exact",
+            command_delay_cycles=0,
+        ),
+        3,
+    )
+    assert mixed.viscous_nm_s == (1.0, 2.0, 3.0) and mixed.velocity == "exact"
+    assert mixed.command_delay == 0 and mixed.armature_kgm2 == data.armature_kgm2
+    for overrides, n, param in (
+        ({"effects": "puma560"}, 6, "effects"),
+        ({"effects": "panda"}, 3, "effects"),
+        ({"effects": "ur5"}, 3, "effects"),
+        ({"damping": [1.0]}, 3, "damping"),
+        ({"armature": [0.1, -0.1, 0.0]}, 3, "armature"),
+        ({"velocity_source": "tacho"}, 3, "velocity_source"),
+    ):
+        with pytest.raises(ConfigError, match=f"^parameter '{param}'"):
+            effects_from_values(_effect_values(**overrides), n)
+
+
+def test_panda_in_mujoco_with_its_identified_friction():
+    robot = _panda()
+    effects = effects_from_values(_effect_values(effects="panda"), 7)
+    engine = make_engine(
+        "mujoco",
+        robot,
+        Payload(),
+        effects,
+        period=0.001,
+        max_step=0.001,
+        q0=np.zeros(7),
+        loaded=True,
+    )
+    np.testing.assert_allclose(engine.model.dof_frictionloss, np.array(PANDA_FRICTION_PHI1_NM) / 2)

@@ -140,8 +140,9 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "effects",
         "ideal",
-        f"what a physical arm adds, as a preset: {' or '.join(EFFECT_PRESETS)} (the 3-joint "
-        "PUMA 560's data); the parameters below override it one by one",
+        f"what a physical arm adds, as a preset: {', '.join(EFFECT_PRESETS)} (ideal: none; "
+        "puma560: the 3-joint PUMA 560's motor, gear and friction data; panda: the Panda's "
+        "identified friction); the parameters below override it one by one",
     ),
     Param("damping", [], "mujoco: viscous joint friction (N m s/rad per joint); empty = preset"),
     Param("frictionloss", [], "mujoco: Coulomb joint friction (N m per joint); empty = preset"),
