@@ -364,9 +364,9 @@ class FourThreeFour(PiecewisePolynomial):
     ----------
     q0, qf : array_like, shape (n,)
         Initial and final joint positions, rad.
-    segment_times : sequence of 3 floats, default (0.2, 0.6, 0.2)
+    segment_times : sequence of 3 floats, default :data:`SEGMENT_TIMES`
         Durations ``(t1, t2, t3)`` of the lift-off, travel and set-down segments, s, each > 0.
-    lift_off, set_down : float or array_like of shape (n,), default 0.1 and 0.9
+    lift_off, set_down : float or (n,) array_like, default :data:`LIFT_OFF`, :data:`SET_DOWN`
         A float is a fraction of each joint's travel (position ``q0 + f * (qf - q0)``) and must
         lie in (0, 1); an array is the explicit joint positions, rad.  When both are fractions,
         ``lift_off < set_down`` is required.
