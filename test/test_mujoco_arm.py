@@ -13,8 +13,8 @@ from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_payload
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
-from apc_plant_sim.effects import ArmEffects, puma560_effects
-from apc_plant_sim.engines import PANDA_FRICTION_PHI1_NM, effects_from_values, make_engine
+from apc_plant_sim.effects import PANDA_FRICTION_PHI1_NM, ArmEffects, puma560_effects
+from apc_plant_sim.engines import effects_from_values, make_engine
 from apc_plant_sim.mujoco_arm import (
     MIN_MASS_KG,
     JointEffects,
@@ -273,6 +273,7 @@ def test_effect_presets_and_overrides():
     np.testing.assert_allclose(puma.armature_kgm2, [0.784, 2.325, 0.577], atol=1e-3)
     panda = effects_from_values(_effect_values(effects="panda"), 7)
     np.testing.assert_allclose(panda.coulomb_pos_nm, np.array(PANDA_FRICTION_PHI1_NM) / 2)
+    assert panda.velocity == "difference" and len(panda.counts_per_rev) == 7
     assert panda.command_delay == 1 and not panda.viscous_nm_s
     mixed = effects_from_values(
         _effect_values(

@@ -23,8 +23,8 @@ search for consensus among model parameters reported for the PUMA 560 robot", IC
 friction is that identified by B. Armstrong, O. Khatib and J. Burdick, "The explicit dynamic
 model and inertial parameters of the PUMA 560 arm", ICRA 1986), referred to the joint side as
 the Toolbox does: armature ``J_m G²``, viscous ``B G²``, Coulomb ``T_c |G|``. The Franka Panda
-defaults (:func:`panda_effects`) are an identified friction, Franka's reflected rotor inertias
-and an assumed encoder; each source is named at its constant.
+defaults (:func:`panda_effects`) are an identified friction and an assumed encoder, no rotor
+inertia (a link-side torque interface); each source is named at its constant.
 """
 
 from __future__ import annotations
@@ -62,11 +62,9 @@ PUMA560_ENCODER_COUNTS_PER_MOTOR_REV = 1000.0
 PANDA_FRICTION_PHI1_NM = (0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489)
 PANDA_FRICTION_PHI2_S_RAD = (5.1181, 9.0657, 10.136, 5.5903, 8.3469, 17.133, 10.336)
 PANDA_FRICTION_PHI3_RAD_S = (0.039533, 0.025882, -0.04607, 0.036194, 0.026226, -0.021047, 0.0035526)
-# Rotor inertia reflected through the gears (kg m^2): Franka's data for its FR3 arm (the Panda's
-# successor, same drive sizes), as Drake's franka_description carries it; Franka publishes none
-# for the Panda itself.
-PANDA_REFLECTED_INERTIA_KGM2 = (0.605721456, 0.605721456, 0.462474144, 0.462474144,
-                                0.205544064, 0.205544064, 0.205544064)  # fmt: skip
+# No rotor inertia: the Panda's commanded torque is the link-side torque its joint torque sensors
+# measure, the motor's inertia is inside the drive's own torque loop (and Gaz et al. identify the
+# link inertias from those link-side torques, as apc's Panda URDF carries them).
 # Franka publishes no encoder resolution: 2^16 counts per joint revolution (9.6e-5 rad, the order
 # of the PUMA's joint-side resolution above) is an assumption.
 PANDA_ENCODER_COUNTS_PER_JOINT_REV = 65536.0
@@ -196,11 +194,12 @@ def puma560_effects(
 def panda_effects(
     velocity: VelocitySource = "difference", command_delay: int = 1, seed: int = 0
 ) -> ArmEffects:
-    """Every effect on for the Franka Emika Panda (7 joints), from the data above.
+    """Every effect of a physical arm for the Franka Emika Panda (7 joints), from the data above.
 
     Coulomb friction is Gaz et al.'s sigmoid at full speed, ``phi1 / (1 + exp(phi2 phi3))`` for
-    ``q' > 0`` and ``phi1 / (1 + exp(-phi2 phi3))`` for ``q' < 0``; no viscous friction (their
-    model has none). The velocity noise of ``velocity="noisy"`` is one encoder count per 10 ms.
+    ``q' > 0`` and ``phi1 / (1 + exp(-phi2 phi3))`` for ``q' < 0`` (they sum to ``phi1``); no
+    viscous friction (their model has none) and no rotor inertia (see its comment). The velocity
+    noise of ``velocity="noisy"`` is one encoder count per 10 ms.
     """
     phi1 = np.array(PANDA_FRICTION_PHI1_NM)
     shift = np.array(PANDA_FRICTION_PHI2_S_RAD) * np.array(PANDA_FRICTION_PHI3_RAD_S)
@@ -208,7 +207,6 @@ def panda_effects(
     return ArmEffects(
         coulomb_pos_nm=tuple(phi1 / (1.0 + np.exp(shift))),
         coulomb_neg_nm=tuple(phi1 / (1.0 + np.exp(-shift))),
-        armature_kgm2=PANDA_REFLECTED_INERTIA_KGM2,
         counts_per_rev=(counts,) * len(phi1),
         velocity=velocity,
         velocity_noise_rad_s=float(2.0 * np.pi / counts / 0.010),

@@ -25,7 +25,7 @@ import numpy as np
 
 from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, with_payload
-from apc_plant_sim.effects import ArmEffects, puma560_effects
+from apc_plant_sim.effects import ArmEffects, panda_effects, puma560_effects
 from apc_plant_sim.plant import Plant, PlantConfig
 
 ENGINES = ("pinocchio", "mujoco")
@@ -108,13 +108,6 @@ class PinocchioEngine(EngineSetup):
 #: ``effects`` presets: every effect of a physical arm from its data (name -> builder).
 EFFECT_PRESETS = ("ideal", "puma560", "panda")
 
-#: Franka Emika Panda joint friction identified by C. Gaz, M. Cognetti, A. Oliva, P. Robuffo
-#: Giordano and A. De Luca, "Dynamic identification of the Franka Emika Panda robot with
-#: retrieval of feasible parameters using penalty-based optimization", IEEE RA-L 4(4), 2019:
-#: ``tau_f = phi1 / (1 + exp(-phi2 (q' + phi3))) - phi1 / (1 + exp(-phi2 phi3))``, a smoothed
-#: Coulomb friction with no viscous term at speed; its two asymptotes average to ``phi1 / 2``,
-#: MuJoCo's symmetric ``frictionloss``. ``phi1`` per joint (N m):
-PANDA_FRICTION_PHI1_NM = (0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489)
 VELOCITY_SOURCES = ("exact", "noisy", "difference")
 
 
@@ -123,7 +116,7 @@ def effects_from_values(values: Mapping[str, Any], n: int) -> ArmEffects:
 
     ``effects`` picks the preset (``ideal``: all off; ``puma560``: the three-joint PUMA 560's
     motor, gear and friction data, :func:`apc_plant_sim.effects.puma560_effects`; ``panda``:
-    the Panda's identified friction, :data:`PANDA_FRICTION_PHI1_NM`, and a one-period delay); each
+    the Franka Panda's, :func:`apc_plant_sim.effects.panda_effects`); each
     per-joint parameter that is not empty, ``velocity_source`` when not empty and
     ``velocity_noise`` / ``command_delay_cycles`` when >= 0 replace the preset's value.
     MuJoCo's ``frictionloss`` is symmetric: a preset's Coulomb levels for the two directions
@@ -144,11 +137,7 @@ def effects_from_values(values: Mapping[str, Any], n: int) -> ArmEffects:
                 f"parameter 'effects': 'panda' carries data for the Panda's 7 joints, the arm "
                 f"has {n}"
             )
-        # The identification gives friction only; a torque-controlled arm's 1 kHz loop adds one
-        # period of delay. Quantisation, velocity noise and rotor inertia have no cited figure
-        # (the identified link inertias include the rotors): off.
-        half = tuple(0.5 * phi1 for phi1 in PANDA_FRICTION_PHI1_NM)
-        base = ArmEffects(coulomb_pos_nm=half, coulomb_neg_nm=half, command_delay=1)
+        base = panda_effects()
     else:
         raise ConfigError(
             f"parameter 'effects': must be one of {', '.join(EFFECT_PRESETS)}, got {preset!r}"

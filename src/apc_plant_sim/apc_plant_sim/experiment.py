@@ -90,6 +90,21 @@ class RunSpec:
         return {"feedforward_node": feedforward, "feedback_node": feedback, "plant_node": plant}
 
 
+def recorder_node(
+    path: Path, context: rclpy.Context, description: Mapping[str, Any], sim_time: bool = True
+) -> Any:
+    """A recorder writing ``path``, the run's description in ``custom_data['apc.run']`` (what
+    :func:`apc_plant_sim.recording.load_run` reads back)."""
+    from apc_core.recorder import RecorderNode
+
+    return RecorderNode(
+        output=path,
+        context=context,
+        parameter_overrides=[Parameter("use_sim_time", value=sim_time)],
+        custom_data={"apc.run": yaml.safe_dump(dict(description), sort_keys=False)},
+    )
+
+
 def law_parameters(controller: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
     """The feedback law's node parameters: ``controller`` and each setting under its prefix
     (``adaptive.`` or ``gains.``), as declared by ``feedback_node`` (and ``robot_node``)."""
@@ -206,7 +221,6 @@ def run_in_process(
     installs no handlers for a context of our own): the recording is finished, every node
     destroyed, and the outcome says ``interrupted``.
     """
-    from apc_core.recorder import RecorderNode
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
     from apc_plant_sim.node import PlantNode
@@ -222,13 +236,7 @@ def run_in_process(
         executor = None
         t0 = time.monotonic()
         try:
-            sim_time = [Parameter("use_sim_time", value=True)]
-            recorder = RecorderNode(
-                output=path,
-                context=context,
-                parameter_overrides=sim_time,
-                custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
-            )
+            recorder = recorder_node(path, context, _describe(spec))
             nodes.append(recorder)
             nodes.append(
                 FeedforwardNode(
@@ -288,7 +296,6 @@ def run_in_processes(
     and are waited for (:func:`stop_processes`), the recording is finished, and the outcome
     says ``interrupted``. No child outlives the runner.
     """
-    from apc_core.recorder import RecorderNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{spec.name}.mcap"
@@ -313,12 +320,7 @@ def run_in_processes(
             return max(recorder.counts.get("/joint_states", 0) - 1, 0) if recorder else 0
 
         try:
-            recorder = RecorderNode(
-                output=path,
-                context=context,
-                parameter_overrides=[Parameter("use_sim_time", value=True)],
-                custom_data={"apc.run": yaml.safe_dump(_describe(spec), sort_keys=False)},
-            )
+            recorder = recorder_node(path, context, _describe(spec))
             executor = make_executor("events", context)
             executor.add_node(recorder)
 

@@ -75,13 +75,17 @@ class RecordedRun:
 _TOPICS = (wire.JOINT_STATES, wire.SETPOINT, wire.FEEDBACK_TORQUE, wire.ESTIMATE)
 
 
+def _custom_run(path: Path) -> dict[str, Any]:
+    """The experiment description stored in the file (``custom_data['apc.run']``), or {}."""
+    meta = bag_info(path).get("rosbag2_metadata") or {}
+    custom = (meta.get("rosbag2_bagfile_information") or meta).get("custom_data") or {}
+    return (yaml.safe_load(custom["apc.run"]) if "apc.run" in custom else None) or {}
+
+
 def load_run(path: str | Path) -> RecordedRun:
     """Read ``joint_states``, set points, torques and estimates of a recording."""
     path = Path(path)
-    info = bag_info(path)
-    meta = info.get("rosbag2_metadata") or {}
-    custom = (meta.get("rosbag2_bagfile_information") or meta).get("custom_data") or {}
-    run = yaml.safe_load(custom["apc.run"]) if "apc.run" in custom else {}
+    run = _custom_run(path)
     states: dict[int, Any] = {}
     setpoints: dict[int, Any] = {}
     feedback: dict[int, Any] = {}
@@ -146,5 +150,80 @@ def load_run(path: str | Path) -> RecordedRun:
         trace_p=trace_p,
         residual_norm=residual,
         theta_t=theta_t,
-        run=run or {},
+        run=run,
+    )
+
+
+def load_robot_run(path: str | Path) -> RecordedRun:
+    """Read a robot-mode recording: rows from the start of the move, ``t = 0`` there.
+
+    A ros2_control driver stamps ``/joint_states`` with its own clock at its own rate, so the
+    rows are the samples the controllers took (``feedback/sample``, stamped ``kT``: what the law
+    measured, with the driver's quantisation and velocity), each with the set point of its
+    stamp. The move starts at the last sample before the first set point that moves (a goal
+    starts after a hold). ``applied`` is the torque of the driver's first state after the
+    sample (the torque over the driver period that followed it). There is no feedback-torque
+    topic in robot mode (the commanding node adds ``u_n + du`` itself): ``du`` is NaN, and so is
+    the identification telemetry.
+    """
+    path = Path(path)
+    run = _custom_run(path)
+    samples: dict[int, Any] = {}
+    setpoints: dict[int, Any] = {}
+    driver: list[tuple[int, Any]] = []
+    names: tuple[str, ...] | None = None
+    for m in read_messages(path):
+        if m.topic.endswith("/" + wire.SAMPLE):
+            msg = m.decode()
+            names = names or tuple(msg.name)
+            samples[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif m.topic.endswith("/" + wire.SETPOINT):
+            msg = m.decode()
+            setpoints[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif m.topic.endswith("/" + wire.JOINT_STATES):
+            msg = m.decode()
+            driver.append((wire.stamp_to_ns(msg.header.stamp), msg))
+    if names is None:
+        raise ValueError(f"{path}: no {wire.SAMPLE} recorded (not a robot-mode run)")
+    stamps = sorted(samples)
+    n, rows = len(names), len(stamps)
+    q, qd = np.full((rows, n), np.nan), np.full((rows, n), np.nan)
+    q_d, qd_d, qdd_d, u_n = (np.full((rows, n), np.nan) for _ in range(4))
+    for i, stamp in enumerate(stamps):
+        js = wire.joint_state_to_arrays(samples[stamp], names, require=("position", "velocity"))
+        q[i], qd[i] = js.position, js.velocity
+        if stamp in setpoints:
+            sp = wire.msg_to_setpoint(setpoints[stamp], names)
+            q_d[i], qd_d[i], qdd_d[i], u_n[i] = sp.q, sp.qd, sp.qdd, sp.u_n
+    moving = np.flatnonzero(np.any(np.nan_to_num(np.abs(qd_d)) > 0.0, axis=1))
+    start = max(int(moving[0]) - 1, 0) if moving.size else 0
+    applied = np.full((rows, n), np.nan)
+    driver.sort(key=lambda item: item[0])
+    driver_stamps = np.array([stamp for stamp, _ in driver], dtype=np.int64)
+    for i, stamp in enumerate(stamps):
+        j = int(np.searchsorted(driver_stamps, stamp, side="right"))
+        if j < len(driver):
+            state = wire.joint_state_to_arrays(
+                driver[j][1], names, require=("position",), allow_extra=True
+            )
+            if state.effort is not None:
+                applied[i] = state.effort
+    t = (np.array(stamps, dtype=float) - stamps[start]) / wire.NS_PER_S
+    rest = slice(start, None)
+    return RecordedRun(
+        path=path,
+        joint_names=names,
+        t=t[rest],
+        q=q[rest],
+        qd=qd[rest],
+        applied=applied[rest],
+        q_d=q_d[rest],
+        qd_d=qd_d[rest],
+        qdd_d=qdd_d[rest],
+        u_n=u_n[rest],
+        du=np.full((rows - start, n), np.nan),
+        trace_p=np.full(rows - start, np.nan),
+        residual_norm=np.full(rows - start, np.nan),
+        theta_t=None,
+        run=run,
     )

@@ -11,7 +11,10 @@ from the recordings only. Runs:
 - **sweep**: payloads 0-5 lb in 1 lb steps, the worst maximum error of each controller;
 - **pickup**: the 5 lb payload picked up at t = 0.5 s, and the samples needed to recover;
 - **puma6**: the full six-joint PUMA 560 with a six-joint move and 5 lb;
-- **panda**: Franka Panda from the ``example-robot-data`` package (fingers locked), 5 lb.
+- **panda**: Franka Panda from the ``example-robot-data`` package (fingers locked), 5 lb;
+- **robot**: through the robot interface (ros2_control's, :mod:`apc_plant_sim.robot_compare`):
+  the 3-joint PUMA and the Panda on the simulated robot (MuJoCo), ideal and with every effect
+  of a physical arm on, for computed torque, PID and the adaptive presets.
 
 Writes ``<out>/<timestamp>/`` with the recordings, ``report.md``, PNG figures and
 ``summary.json``, and prints the Table 2 analogue next to the paper's numbers.
@@ -31,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from apc_core.robot import example_robot_urdf
+from apc_plant_sim import robot_compare
 from apc_plant_sim.analyze import analyze_file
 from apc_plant_sim.experiment import Progress, RunSpec, run_in_process
 from apc_plant_sim.scenario import (
@@ -45,7 +49,7 @@ from apc_plant_sim.scenario import (
 LB = 0.45359237
 CASE_LABELS = {"a": "no load", "b": "1.134 kg (half)", "c": "2.268 kg (5 lb)"}
 PAPER_KEYS = {"a": "a_no_load", "b": "b_half_load", "c": "c_max_load"}
-GROUPS = ("table2", "trajectory2", "sweep", "pickup", "puma6", "panda")
+GROUPS = ("table2", "trajectory2", "sweep", "pickup", "puma6", "panda", "robot")
 
 
 @dataclass(frozen=True)
@@ -346,6 +350,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     t0 = time.monotonic()
     planned = plan(args.quick, only)
     outcomes = execute(planned, out, progress=not args.quiet)
+    robot_cases = robot_compare.plan(args.quick) if "robot" in only else []
+    robot_results = robot_compare.execute(robot_cases, out, progress=not args.quiet)
     metrics = {
         p.spec.name: analyze_file(outcomes[p.spec.name]["path"])
         for p in planned
@@ -369,10 +375,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             preset: acceptance(planned, metrics, preset) for preset in ("paper", "recommended")
         },
         "recovery_samples": {},
+        "robot": robot_results,
     }
     made: list[Path] = []
     if not args.no_figures:
         made = figures(planned, outcomes, metrics, out)
+        made += robot_compare.figures(robot_cases, robot_results, out)
         from apc_plant_sim import plots
         from apc_plant_sim.recording import load_run
 
@@ -382,10 +390,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 summary["recovery_samples"][p.label] = plots.recovery_samples(run, 0.5, 0.05)
     summary["wall_s"] = round(time.monotonic() - t0, 1)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    report = write_report(out, planned, metrics, paper, summary, made)
+    robot_text = robot_compare.report_section(robot_cases, robot_results) if robot_cases else ""
+    report = write_report(out, planned, metrics, paper, summary, made, robot_text)
     print(report.split("\n## ")[1] if "\n## " in report else report)
     print(f"\nreport: {out / 'report.md'} ({len(planned)} runs, {summary['wall_s']} s)")
     failed = [p.spec.name for p in planned if not outcomes[p.spec.name]["ok"]]
+    failed += [name for name, result in robot_results.items() if not result["ok"]]
     return 1 if failed else 0
 
 
@@ -396,6 +406,7 @@ def write_report(
     paper: dict,
     summary: dict,
     figures_made: Sequence[Path],
+    robot_section: str = "",
 ) -> str:
     """``report.md``: the tables and figures of this reproduction."""
     parts = [
@@ -419,6 +430,11 @@ def write_report(
         parts.append(
             "Samples after the pickup until every joint stays within 0.05 deg: "
             + ", ".join(f"{k}: {v}" for k, v in summary["recovery_samples"].items())
+        )
+    if robot_section:
+        parts.append(
+            "## Through the robot interface: ros2_control's, on MuJoCo, ideal and physical\n\n"
+            f"{robot_compare.SUMMARY}\n\n{robot_section}"
         )
     if figures_made:
         parts.append("## Figures\n\n" + "\n".join(f"![{f.stem}]({f.name})" for f in figures_made))

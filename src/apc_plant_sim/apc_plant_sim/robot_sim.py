@@ -21,8 +21,9 @@ steps as fast as the controllers answer, the way Gazebo or MuJoCo are run with
 that state (or ``sim_wait_s`` of wall time) before it integrates to ``t + 1/state_rate``.
 Controllers slower than the driver (``state_rate`` = 500 Hz, T = 10 ms) answer every
 ``sim_cycles_per_command`` cycles; the cycles in between step without waiting. Before the first
-command it re-sends the state every :data:`SIM_RESEND_S` (or ``sim_wait_s`` if shorter)
-without advancing, for controllers that start later.
+command the arm stands on its brakes and time moves one cycle every :data:`SIM_RESEND_S` (or
+``sim_wait_s`` if shorter) of wall time: controllers that start later find a state, and
+controllers on ``use_sim_time`` reach their first tick.
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ JOINT_STATES_TOPIC = "/joint_states"
 #: ``~/commands`` of an effort ``forward_command_controller`` named ``effort_controller``.
 DEFAULT_COMMAND_TOPIC = "/effort_controller/commands"
 
-#: sim_time: wall seconds between re-sends of the first state until a command arrives.
+#: sim_time: wall seconds between braked cycles until the first command arrives.
 SIM_RESEND_S = 0.1
 
 _DEFAULTS = DriverConfig()
@@ -291,6 +292,13 @@ class RobotSimNode(Node):
             tick = guarded(self, self.diagnostics, "cycle", self._wall_cycle)
             self._timer = self.create_timer(config.period, tick, clock=self._wall)
 
+    @property
+    def driver_time(self) -> float:
+        """Driver time since the first cycle (s): sim time, or wall time since it started."""
+        if self.sim_time:
+            return self._t
+        return 0.0 if self._start is None else self._now() - self._start
+
     # -- wire -----------------------------------------------------------------------------------
     def _now(self) -> float:
         if self.sim_time:
@@ -368,6 +376,18 @@ class RobotSimNode(Node):
         self._cycle(now)
 
     # -- sim time -------------------------------------------------------------------------------
+    def _sim_braked_cycle(self) -> None:
+        """Before the first command: one cycle on the brakes, time moving on.
+
+        Controllers on ``use_sim_time`` take their first sample when their clock reaches their
+        first tick, so time must pass before they can answer at all; the arm stands still on
+        its brakes meanwhile, as it would on hardware.
+        """
+        self._cycle(self._t)
+        self._k += 1
+        self._t = self._k * self._period_ns / wire.NS_PER_S
+        self._publish(self.driver.measure(self._t))
+
     def _sim_step(self) -> None:
         """Integrate one period, then on to the next cycle that waits for a command."""
         while True:
@@ -382,7 +402,7 @@ class RobotSimNode(Node):
         waited = time.monotonic() - self._published_wall
         if not self.driver.has_command:
             if waited >= min(SIM_RESEND_S, self._sim_wait_s):
-                self._publish(self.driver.measure(self._t))
+                self._sim_braked_cycle()
         elif waited >= self._sim_wait_s:
             self.diagnostics.count("unanswered_cycles")
             self._sim_step()

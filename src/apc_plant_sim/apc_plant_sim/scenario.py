@@ -125,6 +125,16 @@ class Scenario:
     def move_end_sample(self) -> int:
         return round(self.duration / self.period)
 
+    def move(self) -> FourThreeFour:
+        """The planned 4-3-4 move."""
+        return FourThreeFour(
+            np.deg2rad(self.q_start_deg),
+            np.deg2rad(self.q_goal_deg),
+            segment_times=tuple(self.segment_times),
+            lift_off=self.lift_off,
+            set_down=self.set_down,
+        )
+
 
 def paper_scenario(case: str, **overrides: Any) -> Scenario:
     """The paper's experiment, case ``a`` (no load), ``b`` (half of 5 lb) or ``c`` (5 lb)."""
@@ -160,13 +170,7 @@ def build(scenario: Scenario) -> Built:
         ),
     )
     controller_robot = with_inertia_error(robot, scenario.inertia_error)
-    trajectory = FourThreeFour(
-        np.deg2rad(scenario.q_start_deg),
-        np.deg2rad(scenario.q_goal_deg),
-        segment_times=tuple(scenario.segment_times),
-        lift_off=scenario.lift_off,
-        set_down=scenario.set_down,
-    )
+    trajectory = scenario.move()
     plant_config = PlantConfig(period=scenario.period, step=scenario.step)
     return Built(plant_robot, controller_robot, robot, trajectory, plant_config)
 

@@ -1,0 +1,553 @@
+"""``robot_compare``: the comparison a ROS user would make, through the robot interface.
+
+The simulated ros2_control robot (:mod:`apc_plant_sim.robot_sim`, engine MuJoCo) and apc's
+robot-mode controllers (the feedforward with ``mode: robot`` and the lifecycle commanding node
+``robot_node``, autostarted) run composed in one process with the recorder. The arm holds its
+measured position for :data:`HOLD_BEFORE_S`; then the paper's move goes to the feedforward as a
+goal on ``feedforward/trajectory``, the way a user sends one: the 4-3-4's lift-off, set-down and
+end as waypoints with their velocities and accelerations (the feedforward plans quintic segments
+through them, and a quintic meeting a quartic's or a cubic's position, velocity and acceleration
+at both ends is that polynomial: the plan is the 4-3-4 itself). The run ends
+:data:`HOLD_AFTER_S` after the move.
+
+Runs: the 3-joint PUMA 560 and the Franka Panda, cases (a)-(c) and the 5 lb payload picked up
+:data:`PICKUP_AFTER_S` into the move, on the ideal arm and then with every effect of a physical
+arm on (robot_sim's presets, :data:`PHYSICAL_PRESETS`: friction, rotor inertia where the arm
+has it in its drive's torque path, encoder quantisation, the velocity differenced by the drive
+from the quantised positions, a command delay of one driver period), for computed torque, the
+JTC-style PID, and the adaptive law with the paper's settings and the recommended and physical
+presets. Metrics per joint are read back from the recordings
+(:func:`apc_plant_sim.recording.load_robot_run`, :mod:`apc_plant_sim.metrics`).
+
+Time. ``sim``: robot_sim owns the clock and steps as fast as the controllers answer, every node
+on ``use_sim_time``: reproducible, faster than real time. ``realtime``: the driver on its wall
+timer, the controllers at 100 Hz on the wall clock, all in this one process.
+
+    robot_compare [--quick] [--out runs/robot] [--arms puma3,panda] [--realtime]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from apc_core import wire
+from apc_core.nodeutil import StopSignals, destroy_nodes, make_executor
+from apc_core.robot import example_robot_urdf
+from apc_plant_sim.experiment import (
+    Progress,
+    law_parameters,
+    overrides,
+    recorder_node,
+    wait_for,
+)
+from apc_plant_sim.scenario import (
+    PAPER_CASES,
+    Scenario,
+    paper_scenario,
+    paper_settings,
+    physical_settings,
+    recommended_settings,
+)
+
+#: The arm holds its measured position this long before the goal is sent (s, driver time).
+HOLD_BEFORE_S = 0.3
+#: Recorded after the end of the move (s).
+HOLD_AFTER_S = 0.5
+#: The pickup case: the payload is picked up this long after the goal is sent (s).
+PICKUP_AFTER_S = 0.5
+#: The driver's rate (ros2_control's ``update_rate``): a multiple of 1/T, as robot mode needs.
+DRIVER_RATE_HZ = 500.0
+#: sim time: wall seconds robot_sim waits for a command before it steps without one.
+SIM_WAIT_S = 0.5
+
+#: What the report says about these runs, before the tables.
+SUMMARY = (
+    "The simulated ros2_control robot (robot_sim: joint_state_broadcaster-style `/joint_states` "
+    f"at {DRIVER_RATE_HZ:g} Hz, efforts as `Float64MultiArray` on `/effort_controller/commands`; "
+    "MuJoCo's dynamics) and the robot-mode controllers (feedforward `mode: robot`, lifecycle "
+    "`robot_node`, T = 10 ms), composed in one process on sim time. The arm holds "
+    f"{HOLD_BEFORE_S:g} s, then the paper's move arrives as a goal on `feedforward/trajectory`; "
+    "errors are the controllers' samples against their set points, from the move's start. "
+    "`physical`: friction, rotor inertia, encoder quantisation, the velocity differenced by the "
+    "drive from quantised positions over one driver period and a one-driver-period command "
+    "delay, from each arm's data (apc_plant_sim/effects.py). The pickup: 5 lb picked up "
+    f"{PICKUP_AFTER_S:g} s into the move. Cells: max / final error (deg)."
+)
+CASES = ("a", "b", "c", "pickup")
+#: What the arm adds: nothing, or every effect of a physical arm (its data, :mod:`effects`).
+EFFECTS = ("ideal", "physical")
+#: Feedback laws by label: (controller, settings).
+LAWS: dict[str, tuple[str, dict[str, Any] | None]] = {
+    "computed torque": ("computed_torque", None),
+    "PID": ("pid", None),
+    "adaptive paper": ("adaptive", paper_settings()),
+    "adaptive recommended": ("adaptive", recommended_settings()),
+    "adaptive physical": ("adaptive", physical_settings()),
+}
+BASELINES = ("computed torque", "PID")
+#: The preset for an arm behind a drive, run on the physical arm only.
+PHYSICAL_LAW = "adaptive physical"
+
+
+@cache
+def _panda_urdf() -> str:
+    return str(example_robot_urdf("panda_description/urdf/panda.urdf"))
+
+
+def arm_scenario(arm: str, case: str) -> Scenario:
+    """The arm with case ``case``'s payload (the 5 lb of case (c) for the pickup)."""
+    payload = PAPER_CASES["c" if case == "pickup" else case]
+    if arm == "puma3":
+        scenario = paper_scenario("c")
+    elif arm == "panda":
+        scenario = Scenario(
+            urdf=_panda_urdf(),
+            lock_joints=("panda_finger_joint1", "panda_finger_joint2"),
+            payload_frame="panda_hand",
+            inertia_error=(0.1, -0.1, 0.1, -0.1, 0.1, -0.1, 0.1),
+            q_start_deg=(0.0, -20.0, 0.0, -120.0, 0.0, 100.0, 45.0),
+            q_goal_deg=(60.0, 15.0, 20.0, -80.0, 30.0, 130.0, 0.0),
+        )
+    else:
+        raise ValueError(f"arm must be puma3 or panda, got {arm!r}")
+    at_s = HOLD_BEFORE_S + PICKUP_AFTER_S if case == "pickup" else 0.0
+    return replace(scenario, payload_kg=payload, payload_at_s=at_s, hold_s=HOLD_AFTER_S)
+
+
+#: robot_sim's ``effects`` preset of each arm: every effect of a physical arm from its data
+#: (:func:`apc_plant_sim.effects.puma560_effects`, :func:`apc_plant_sim.effects.panda_effects`).
+PHYSICAL_PRESETS = {"puma3": "puma560", "panda": "panda"}
+#: MuJoCo's own dynamics and integrator: an engine no one here wrote.
+ENGINE = "mujoco"
+
+
+@dataclass(frozen=True)
+class RobotCase:
+    """One run: arm, case, what the arm adds, feedback law, timing."""
+
+    arm: str
+    case: str
+    effects: str
+    law: str
+    timing: str = "sim"
+
+    @property
+    def name(self) -> str:
+        law = self.law.replace(" ", "_")
+        return f"robot_{self.arm}_{self.case}_{self.effects}_{law}_{self.timing}"
+
+    @property
+    def scenario(self) -> Scenario:
+        return arm_scenario(self.arm, self.case)
+
+
+def plan(
+    quick: bool = False, arms: Sequence[str] = ("puma3", "panda"), realtime: bool = False
+) -> list[RobotCase]:
+    """Every run (``quick``: case (c) only; the ``physical`` preset only where the arm is);
+    ``realtime`` adds case (c) with every effect on, each law, on the wall clock."""
+    cases = ("c",) if quick else CASES
+    runs = [
+        RobotCase(arm, case, effects, law)
+        for arm in arms
+        for effects in EFFECTS
+        for case in cases
+        for law in LAWS
+        if not (effects == "ideal" and law == PHYSICAL_LAW)
+    ]
+    if realtime:
+        runs += [RobotCase(arm, "c", "physical", law, "realtime") for arm in arms for law in LAWS]
+    return runs
+
+
+def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
+    """ROS parameters of each node, keyed by node name (a ROS parameter-file layout)."""
+    sc = case.scenario
+    shared: dict[str, Any] = {"robot_description_path": str(sc.urdf), "gravity": float(sc.gravity)}
+    if sc.lock_joints:
+        shared["lock_joints"] = list(sc.lock_joints)
+    inertia_error = [float(v) for v in sc.inertia_error]
+    controller, settings = LAWS[case.law]
+    period = float(sc.period)
+    feedforward = {**shared, "period": period, "mode": "robot", "inertia_error": inertia_error}
+    robot_node = {
+        **shared,
+        "period": period,
+        "inertia_error": inertia_error,
+        "autostart": True,
+        **law_parameters(controller, settings),
+    }
+    sim = case.timing == "sim"
+    robot_sim = {
+        **shared,
+        "engine": ENGINE,
+        "effects": PHYSICAL_PRESETS[case.arm] if case.effects == "physical" else "ideal",
+        "state_rate": DRIVER_RATE_HZ,
+        "q_initial_deg": [float(v) for v in sc.q_start_deg],
+        "payload.mass_kg": float(sc.payload_kg),
+        "payload.frame": sc.payload_frame or "",
+        "payload.com_m": [float(v) for v in sc.payload_com_m],
+        "payload.at_s": float(sc.payload_at_s),
+        "sim_time": sim,
+        "sim_wait_s": SIM_WAIT_S,
+        "sim_cycles_per_command": round(DRIVER_RATE_HZ * period),
+    }
+    return {"feedforward_node": feedforward, "robot_node": robot_node, "robot_sim": robot_sim}
+
+
+def goal_message(scenario: Scenario, joint_names: Sequence[str]) -> JointTrajectory:
+    """The paper's 4-3-4 move as a trajectory goal (see the module docstring)."""
+    move = scenario.move()
+    msg = JointTrajectory()
+    msg.joint_names = list(joint_names)
+    for t in np.cumsum(scenario.segment_times):
+        q, qd, qdd = move.sample(float(t))
+        point = JointTrajectoryPoint()
+        point.positions, point.velocities, point.accelerations = (
+            [float(v) for v in a] for a in (q, qd, qdd)
+        )
+        ns = round(float(t) * wire.NS_PER_S)
+        point.time_from_start = Duration(sec=ns // wire.NS_PER_S, nanosec=ns % wire.NS_PER_S)
+        msg.points.append(point)
+    return msg
+
+
+def describe(case: RobotCase) -> dict[str, Any]:
+    """What the recording stores about its run (``custom_data['apc.run']``)."""
+    controller, settings = LAWS[case.law]
+    return {
+        "name": case.name,
+        "controller": controller,
+        "settings": dict(settings or {}),
+        "mode": f"robot_{case.timing}",
+        "arm": case.arm,
+        "case": case.case,
+        "effects": case.effects,
+        "law": case.law,
+        "engine": ENGINE,
+        "driver_rate_hz": DRIVER_RATE_HZ,
+        "hold_before_s": HOLD_BEFORE_S,
+        "scenario": {
+            k: list(v) if isinstance(v, tuple) else v for k, v in asdict(case.scenario).items()
+        },
+    }
+
+
+@dataclass
+class RobotOutcome:
+    path: Path
+    ok: bool
+    message: str
+    wall_s: float
+
+
+def _controllers_heard(recorder: Any, sender: Node, goal_pub: Any) -> bool:
+    topics = (wire.SETPOINT, wire.SAMPLE)
+    heard = all(recorder.count_publishers(recorder.resolve_topic_name(t)) >= 1 for t in topics)
+    return heard and goal_pub.get_subscription_count() >= 1
+
+
+def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> RobotOutcome:
+    """Run one case composed in this process (see the module docstring) and record it.
+
+    SIGINT and SIGTERM end the run between two ``spin_once`` calls: the recording is finished,
+    every node destroyed, and the outcome says ``interrupted``.
+    """
+    from apc_feedback.robot_node import RobotNode
+    from apc_feedforward.node import FeedforwardNode
+    from apc_plant_sim.robot_sim import RobotSimNode
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{case.name}.mcap"
+    params = node_parameters(case)
+    scenario = case.scenario
+    end_s = HOLD_BEFORE_S + scenario.duration + HOLD_AFTER_S
+    with StopSignals() as stop:
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        nodes: list[Node] = []
+        executor = None
+        t0 = time.monotonic()
+        try:
+            sim = case.timing == "sim"
+            clock = [Parameter("use_sim_time", value=sim)]
+            recorder = recorder_node(path, context, describe(case), sim)
+            nodes.append(recorder)
+            nodes.append(
+                FeedforwardNode(
+                    context=context,
+                    parameter_overrides=clock + overrides(params["feedforward_node"]),
+                )
+            )
+            controller = RobotNode(
+                context=context, parameter_overrides=clock + overrides(params["robot_node"])
+            )
+            nodes.append(controller)
+            sender = Node("goal_sender", context=context)
+            nodes.append(sender)
+            goal_pub = sender.create_publisher(
+                JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
+            )
+            executor = make_executor("events", context)
+            for node in nodes:
+                executor.add_node(node)
+            wait_for(
+                executor,
+                lambda: stop.check() or _controllers_heard(recorder, sender, goal_pub),
+                30.0,
+                "the controllers",
+            )
+            # The robot comes last: its first joint state finds everything listening.
+            robot = RobotSimNode(
+                context=context, parameter_overrides=overrides(params["robot_sim"])
+            )
+            nodes.append(robot)
+            executor.add_node(robot)
+            goal = goal_message(scenario, controller.joint_names)
+            sent = False
+            while robot.driver_time < end_s:
+                if time.monotonic() - t0 > timeout_s:
+                    return RobotOutcome(path, False, f"timed out after {timeout_s} s", _since(t0))
+                executor.spin_once(timeout_sec=0.05)
+                stop.check()
+                if not sent and robot.driver_time >= HOLD_BEFORE_S:
+                    goal_pub.publish(goal)
+                    sent = True
+            # The recorder takes what is still queued.
+            drain_until = time.monotonic() + 0.2
+            while time.monotonic() < drain_until:
+                executor.spin_once(timeout_sec=0.01)
+            counts = controller.diagnostics.counters
+            faults = {k: counts.get(k, 0) for k in ("watchdog", "path_tolerance_aborts")}
+            ok = not any(faults.values())
+            return RobotOutcome(path, ok, "ok" if ok else f"faults {faults}", _since(t0))
+        except (KeyboardInterrupt, ExternalShutdownException) as exc:
+            return RobotOutcome(path, False, f"interrupted ({exc})".replace(" ()", ""), _since(t0))
+        except TimeoutError as exc:
+            return RobotOutcome(path, False, str(exc), _since(t0))
+        finally:
+            destroy_nodes(nodes, context, executor)
+
+
+def _since(t0: float) -> float:
+    return time.monotonic() - t0
+
+
+def measure(path: str | Path) -> dict[str, Any]:
+    """Per-joint metrics of a robot-mode recording (:mod:`apc_plant_sim.metrics`)."""
+    from apc_plant_sim.analyze import robot_of
+    from apc_plant_sim.metrics import compute_metrics
+    from apc_plant_sim.recording import load_robot_run
+
+    run = load_robot_run(path)
+    # The recording runs on while the recorder drains: up to the planned hold after the move.
+    end = run.move_end_index + round(HOLD_AFTER_S / float(run.run["scenario"]["period"])) + 1
+    run = replace(run, t=run.t[:end], q=run.q[:end], q_d=run.q_d[:end], applied=run.applied[:end])
+    metrics = compute_metrics(
+        run.joint_names, run.q, run.q_d, run.applied, run.move_end_index, robot=robot_of(run)
+    )
+    return {"samples": len(run.t), **metrics.as_dict()}
+
+
+def execute(
+    cases: Sequence[RobotCase], out: Path, progress: bool = True
+) -> dict[str, dict[str, Any]]:
+    """Run every case; {name: outcome and metrics}."""
+    results: dict[str, dict[str, Any]] = {}
+    bar = Progress(len(cases), "robot comparison", progress)
+    for i, case in enumerate(cases):
+        bar.update(i)
+        outcome = run_case(case, out)
+        entry: dict[str, Any] = {
+            "ok": outcome.ok,
+            "message": outcome.message,
+            "path": str(outcome.path),
+            "wall_s": round(outcome.wall_s, 2),
+        }
+        try:
+            entry["metrics"] = measure(outcome.path)
+        except (OSError, ValueError) as exc:
+            entry.update(ok=False, message=f"{outcome.message}; unreadable: {exc}")
+        if not entry["ok"]:
+            print(f"\n{case.name}: FAILED ({entry['message']})", file=sys.stderr)
+        results[case.name] = entry
+    bar.update(len(cases))
+    bar.close()
+    return results
+
+
+# -- report ---------------------------------------------------------------------------------------
+
+
+def _cell(metrics: Mapping[str, Any] | None, j: int) -> str:
+    if metrics is None:
+        return "failed"
+    return f"{metrics['max_error_deg'][j]:.3f} / {metrics['final_error_deg'][j]:.3f}"
+
+
+def _metrics(results: Mapping[str, dict], case: RobotCase) -> dict[str, Any] | None:
+    entry = results.get(case.name)
+    return entry.get("metrics") if entry and entry.get("ok") else None
+
+
+def comparison_table(
+    cases: Sequence[RobotCase], results: Mapping[str, dict], arm: str, timing: str = "sim"
+) -> str:
+    """Markdown: per effect setting, case and joint, each law's max / final error (deg)."""
+    rows = [c for c in cases if c.arm == arm and c.timing == timing]
+    laws = list(dict.fromkeys(c.law for c in rows))
+    lines = [
+        "| arm | case | joint | " + " | ".join(f"{law}: max / final" for law in laws) + " |",
+        "|---|---|---|" + "---|" * len(laws),
+    ]
+    for effects in EFFECTS:
+        for case_name in CASES:
+            group = {c.law: c for c in rows if c.effects == effects and c.case == case_name}
+            if not group:
+                continue
+            measured = [m for c in group.values() if (m := _metrics(results, c)) is not None]
+            joints = measured[0]["joints"] if measured else []
+            for j, joint in enumerate(joints):
+                cells = [_cell(_metrics(results, group[law]), j) if law in group else "-"
+                         for law in laws]  # fmt: skip
+                lines.append(f"| {effects} | {case_name} | {joint} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def beats_baselines(
+    cases: Sequence[RobotCase], results: Mapping[str, dict], law: str
+) -> dict[str, Any]:
+    """Per (arm, effects, case, timing): does ``law`` have a smaller max and final error than
+    every baseline on every joint? With the joints where it does not."""
+    out: dict[str, Any] = {}
+    for c in cases:
+        if c.law != law:
+            continue
+        mine = _metrics(results, c)
+        losses: list[str] = []
+        for base in BASELINES:
+            other = _metrics(results, replace(c, law=base))
+            if mine is None or other is None:
+                losses.append(f"{base}: no run")
+                continue
+            for key in ("max_error_deg", "final_error_deg"):
+                pairs = zip(mine[key], other[key], strict=True)
+                worse = [mine["joints"][j] for j, (a, b) in enumerate(pairs) if not a < b]
+                if worse:
+                    losses.append(f"{key.split('_')[0]} vs {base} on {', '.join(worse)}")
+        out[f"{c.arm} {c.effects} {c.case} {c.timing}"] = {"beats": not losses, "where_not": losses}
+    return out
+
+
+def winners(cases: Sequence[RobotCase], results: Mapping[str, dict], key: str) -> str:
+    """Markdown: per arm, effect setting, case and joint, the law with the smallest ``key``."""
+    lines = ["| arm | effects | case | " + key + ": smallest per joint |", "|---|---|---|---|"]
+    groups = dict.fromkeys((c.arm, c.effects, c.case, c.timing) for c in cases)
+    for arm, effects, case_name, timing in groups:
+        members = [c for c in cases if (c.arm, c.effects, c.case, c.timing)
+                   == (arm, effects, case_name, timing)]  # fmt: skip
+        measured = {c.law: m for c in members if (m := _metrics(results, c)) is not None}
+        if not measured:
+            continue
+        joints = next(iter(measured.values()))["joints"]
+        best = [min(measured, key=lambda law, j=j: measured[law][key][j])
+                for j in range(len(joints))]  # fmt: skip
+        tag = case_name if timing == "sim" else f"{case_name} ({timing})"
+        lines.append(f"| {arm} | {effects} | {tag} | {', '.join(best)} |")
+    return "\n".join(lines)
+
+
+def figures(cases: Sequence[RobotCase], results: Mapping[str, dict], out: Path) -> list[Path]:
+    """Per arm, like the paper's Figs 6-8: case (c) error per joint for each law, ideal and with
+    every effect on; and the pickup with every effect on."""
+    from apc_plant_sim import plots
+    from apc_plant_sim.recording import load_robot_run
+
+    made: list[Path] = []
+    titles = {"puma3": "3-joint PUMA 560", "panda": "Franka Panda"}
+    for arm in dict.fromkeys(c.arm for c in cases):
+        for effects in EFFECTS:
+            for case_name in ("c", "pickup"):
+                chosen = [c for c in cases if (c.arm, c.effects, c.case, c.timing)
+                          == (arm, effects, case_name, "sim") and _metrics(results, c)]  # fmt: skip
+                if not chosen or (case_name == "pickup" and effects == "ideal"):
+                    continue
+                runs = {c.law: load_robot_run(results[c.name]["path"]) for c in chosen}
+                what = "ideal arm" if effects == "ideal" else "every physical-arm effect on"
+                target = out / f"robot_{arm}_{case_name}_{effects}.png"
+                title = f"{titles[arm]} through the robot interface ({what})"
+                signs = arm == "puma3"
+                if case_name == "c":
+                    made.append(plots.controller_comparison(
+                        runs, target, f"{title}, 5 lb", paper_signs=signs))  # fmt: skip
+                else:
+                    made.append(plots.pickup(
+                        runs, PICKUP_AFTER_S, target, f"{title}, 5 lb picked up",
+                        paper_signs=signs))  # fmt: skip
+    return made
+
+
+def report_section(cases: Sequence[RobotCase], results: Mapping[str, dict]) -> str:
+    """The report's section: tables per arm, who wins per joint, the goal's verdict."""
+    parts = []
+    for arm in dict.fromkeys(c.arm for c in cases):
+        parts.append(
+            f"### {arm}: max / final error (deg) per joint\n\n"
+            + comparison_table(cases, results, arm)
+        )
+        if any(c.arm == arm and c.timing == "realtime" for c in cases):
+            parts.append(
+                f"{arm}, real time (driver at {DRIVER_RATE_HZ:g} Hz, controllers at 100 Hz):\n\n"
+                + comparison_table(cases, results, arm, "realtime")
+            )
+    for key in ("max_error_deg", "final_error_deg"):
+        parts.append(winners(cases, results, key))
+    for law in ("adaptive recommended", "adaptive physical"):
+        verdicts = beats_baselines(cases, results, law)
+        lines = [f"| run | {law} beats computed torque and PID on every joint | where not |",
+                 "|---|---|---|"]  # fmt: skip
+        for run, v in verdicts.items():
+            verdict = "yes" if v["beats"] else "no"
+            lines.append(f"| {run} | {verdict} | {'; '.join(v['where_not'])} |")
+        parts.append("\n".join(lines))
+    return "\n\n".join(parts)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="robot_compare", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="runs/robot", help="output directory")
+    parser.add_argument("--quick", action="store_true", help="case (c) only")
+    parser.add_argument("--arms", default="puma3,panda", help="puma3, panda or both")
+    parser.add_argument("--realtime", action="store_true", help="also case (c) in real time")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    t0 = time.monotonic()
+    cases = plan(args.quick, [a for a in args.arms.split(",") if a], args.realtime)
+    results = execute(cases, out, progress=not args.quiet)
+    made = figures(cases, results, out)
+    text = report_section(cases, results)
+    figs = "\n".join(f"![{f.stem}]({f.name})" for f in made)
+    (out / "report.md").write_text(f"# Through the robot interface\n\n{text}\n\n{figs}\n")
+    print(text)
+    print(f"\n{len(cases)} runs in {time.monotonic() - t0:.1f} s; report: {out / 'report.md'}")
+    return 0 if all(r["ok"] for r in results.values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
