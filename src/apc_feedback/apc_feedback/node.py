@@ -40,7 +40,8 @@ from apc_core.nodeutil import (
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_feedback.controller import FeedbackError
-from apc_feedback.laws import LAW_PARAMS, LawParameters
+from apc_feedback.laws import LawParameters
+from apc_feedback.presets import PRESET_PARAM, law_params
 from apc_feedback.sampling import (
     Decision,
     GridSampler,
@@ -50,7 +51,8 @@ from apc_feedback.sampling import (
     Verdict,
 )
 
-PARAMS: tuple[Param, ...] = (*CONTROLLER_ROBOT_PARAMS, *LAW_PARAMS)
+#: The node's parameters, with the default preset's adaptive settings (what --help shows).
+PARAMS: tuple[Param, ...] = (*CONTROLLER_ROBOT_PARAMS, PRESET_PARAM, *law_params())
 
 
 class FeedbackNode(Node):
@@ -61,7 +63,9 @@ class FeedbackNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
-        values = declare(self, PARAMS)
+        # The preset first: it gives the adaptive.* parameters their defaults.
+        preset = declare(self, (PRESET_PARAM,))[PRESET_PARAM.name]
+        values = declare(self, (*CONTROLLER_ROBOT_PARAMS, *law_params(preset)))
         robot = controller_robot_from_params(values)
         self.joint_names = robot.joint_names
         self.laws = LawParameters(values, robot)

@@ -3,10 +3,11 @@
 Starts plant, feedforward, feedback and recorder in one process on one executor (default), or
 the three control nodes as separate processes (``--processes``) with the recorder here; runs
 the move and its hold; writes ``<out>/<run>.mcap``; prints progress and a one-line summary;
-exits non-zero on failure. Defaults are the paper's: 3-joint PUMA 560, the 4-3-4 move of its
-simulation study, +-10 % inertia error in the controllers, lockstep timing.
+exits non-zero on failure. Defaults: the paper's 3-joint PUMA 560, the 4-3-4 move of its
+simulation study and +-10 % inertia error in the controllers (another arm's ``--urdf`` gets
+them derived from its URDF, printed), the recommended adaptive preset, lockstep timing.
 
-    experiment --case c --controller adaptive --preset recommended --alpha 150000 --out runs
+    experiment --case c --controller adaptive --preset paper --alpha 150000 --out runs
     experiment --case a --controller computed_torque --mode realtime --processes
 """
 
@@ -31,14 +32,42 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
 from apc_core.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
-from apc_core.params import ConfigError
-from apc_feedback.laws import CONTROLLER_KINDS
+from apc_core.params import ConfigError, params_from
+from apc_feedback.laws import CONTROLLER_KINDS, LAWS
+from apc_feedback.presets import DEFAULT_PRESET
 from apc_plant_sim.scenario import (
     PAPER_CASES,
     PRESETS,
     Scenario,
+    for_urdf,
     paper_scenario,
 )
+
+
+def law_parameters(controller: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The feedback law's node parameters, as ``feedback_node`` (and ``robot_node``) declare
+    them: ``controller`` and every setting of the law, from ``settings`` or else its settings
+    dataclass's default, which is what :func:`make_law` takes offline, so a node run does not
+    depend on the node's preset."""
+    settings = dict(settings or {})
+    law = LAWS.get(controller)
+    values: dict[str, Any] = {"controller": controller}
+    if law is None or law.settings is None:
+        if settings:
+            raise ValueError(f"controller {controller!r} takes no settings, got {sorted(settings)}")
+        return values
+    for row in params_from(law.settings, law.family):
+        key = row.name[len(law.family) :]
+        value = settings.pop(key, row.default)
+        if isinstance(value, (list, tuple)):
+            if not value:
+                continue  # an empty array override would reach rclpy untyped; the default is []
+            value = [float(v) for v in value]
+        values[row.name] = type(row.default)(value) if isinstance(row.default, float) else value
+    if settings:
+        # An override of an undeclared parameter would be dropped silently by rclpy.
+        raise ValueError(f"setting '{sorted(settings)[0]}' is not a parameter of feedback_node")
+    return values
 
 
 @dataclass(frozen=True)
@@ -103,22 +132,6 @@ def recorder_node(
         parameter_overrides=[Parameter("use_sim_time", value=sim_time)],
         custom_data={"apc.run": yaml.safe_dump(dict(description), sort_keys=False)},
     )
-
-
-def law_parameters(controller: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
-    """The feedback law's node parameters: ``controller`` and each setting under its prefix
-    (``adaptive.`` or ``gains.``), as declared by ``feedback_node`` (and ``robot_node``)."""
-    from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
-
-    prefix = "adaptive." if controller == "adaptive" else "gains."
-    declared = {p.name for p in FEEDBACK_PARAMS}
-    out: dict[str, Any] = {"controller": controller}
-    for key, value in (settings or {}).items():
-        if prefix + key not in declared:
-            # An override of an undeclared parameter would be dropped silently by rclpy.
-            raise ValueError(f"setting '{key}' is not a parameter of feedback_node")
-        out[prefix + key] = value if isinstance(value, (str, int)) else float(value)
-    return out
 
 
 def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
@@ -454,14 +467,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--preset",
         choices=sorted(PRESETS),
-        default="paper",
-        help="adaptive settings: the paper's printed ones, or the measured fix (README)",
+        default=DEFAULT_PRESET,
+        help=f"adaptive settings (default {DEFAULT_PRESET}: measured to work; paper: as printed)",
     )
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     parser.add_argument(
         "--payload-at", type=float, default=0.0, help="payload appears at this time (s)"
     )
-    parser.add_argument("--urdf", help="arm URDF (default: the 3-joint PUMA 560)")
+    parser.add_argument(
+        "--urdf",
+        help="arm URDF (default: the 3-joint PUMA 560 and the paper's move); the start pose, "
+        "move, inertia error and payload frame are derived from it and printed",
+    )
+    parser.add_argument(
+        "--lock-joints", nargs="+", default=[], help="URDF joints to freeze (e.g. a gripper's)"
+    )
     parser.add_argument("--payload", type=float, help="payload mass (kg); overrides --case")
     parser.add_argument("--hold", type=float, default=0.5, help="hold after the move (s)")
     parser.add_argument("--scenario", help="YAML file of Scenario fields (overrides the case)")
@@ -480,12 +500,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
+    """The run the command line asks for. An arm given by ``--urdf`` (or in ``--scenario``)
+    gets the per-joint values not given derived from its URDF, each printed in one line."""
+
+    def tell(line: str) -> None:
+        print(f"experiment: {line}", file=sys.stderr)
+
     overrides: dict[str, Any] = {"hold_s": args.hold}
-    if args.urdf:
-        overrides["urdf"] = args.urdf
+    if args.lock_joints:
+        overrides["lock_joints"] = tuple(args.lock_joints)
     if args.scenario:
         values = yaml.safe_load(Path(args.scenario).read_text()) or {}
-        scenario = Scenario.from_dict({**values, **overrides})
+        if args.urdf:
+            values["urdf"] = args.urdf
+        scenario = Scenario.from_dict({**values, **overrides}, report=tell)
+    elif args.urdf:
+        scenario = for_urdf(args.urdf, tell, payload_kg=PAPER_CASES[args.case], **overrides)
     else:
         scenario = paper_scenario(args.case, **overrides)
     if args.payload is not None:

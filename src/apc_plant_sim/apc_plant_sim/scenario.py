@@ -16,13 +16,14 @@ All joint angles in apc are the URDF's, which for the PUMA are the standard-DH a
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from apc_core.defaults import load as load_defaults
 from apc_core.robot import (
     PAPER_GRAVITY_M_S2,
     PAPER_MAX_PAYLOAD_KG,
@@ -33,6 +34,12 @@ from apc_core.robot import (
     with_payload,
 )
 from apc_feedback.laws import make_law
+from apc_feedback.presets import (  # noqa: F401  (re-exported: the runs name them from here)
+    PRESETS,
+    paper_settings,
+    physical_settings,
+    recommended_settings,
+)
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour
 from apc_plant_sim.effects import ArmEffects, PhysicalArm
@@ -101,8 +108,12 @@ class Scenario:
     lock_joints: tuple[str, ...] = field(default_factory=tuple)
 
     @staticmethod
-    def from_dict(values: Mapping[str, Any]) -> Scenario:
-        """Build from a mapping (YAML); unknown keys are rejected with their name."""
+    def from_dict(
+        values: Mapping[str, Any], report: Callable[[str], None] | None = None
+    ) -> Scenario:
+        """Build from a mapping (YAML); unknown keys are rejected with their name. A mapping
+        that names its ``urdf`` gets the per-joint fields it leaves out from that URDF
+        (:func:`for_urdf`), each told to ``report``."""
         known = {f.name for f in fields(Scenario)}
         unknown = sorted(set(values) - known)
         if unknown:
@@ -110,6 +121,8 @@ class Scenario:
         clean = {}
         for key, value in values.items():
             clean[key] = tuple(value) if isinstance(value, list) else value
+        if "urdf" in clean:
+            return for_urdf(clean.pop("urdf"), report, **clean)
         return Scenario(**clean)
 
     @property
@@ -134,6 +147,29 @@ class Scenario:
             lift_off=self.lift_off,
             set_down=self.set_down,
         )
+
+
+#: Scenario fields with one value per joint, or naming a link of the arm: the paper's for its
+#: 3-joint PUMA; derived from the URDF (:mod:`apc_core.defaults`) for any other arm.
+PER_JOINT_FIELDS = ("q_start_deg", "q_goal_deg", "inertia_error", "payload_frame")
+
+
+def for_urdf(
+    urdf: str | Path, report: Callable[[str], None] | None = None, **values: Any
+) -> Scenario:
+    """A scenario on the arm of ``urdf``: ``values`` as given (Scenario fields), and each of
+    :data:`PER_JOINT_FIELDS` not given derived from the URDF, told to ``report`` in one line."""
+    _, defaults = load_defaults(
+        urdf,
+        gravity=values.get("gravity", PAPER_GRAVITY_M_S2),
+        lock_joints=tuple(values.get("lock_joints", ())),
+    )
+    for name in PER_JOINT_FIELDS:
+        if name not in values:
+            values[name] = getattr(defaults, name)
+            if report is not None:
+                report(defaults.describe(name))
+    return Scenario(urdf=str(urdf), **values)
 
 
 def paper_scenario(case: str, **overrides: Any) -> Scenario:
@@ -212,71 +248,6 @@ def payload_pickup_sample(scenario: Scenario) -> int:
     if scenario.payload_kg == 0.0 or scenario.payload_at_s <= 0.0:
         return 0
     return round(scenario.payload_at_s / scenario.period)
-
-
-def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I.
-
-    As printed, the RLS has no wind-up guard (``trace_max < 0``); the corrected Eqs. 30, 33b
-    and 35 are used (their modules, ``rls``, ``linearize`` and ``optimal``, say why).
-    """
-    return {
-        "q_position": 0.1,
-        "q_velocity": 0.1,
-        "r": 1e-6,
-        "rho": 0.95,
-        "alpha": alpha,
-        "trace_max": -1.0,
-    }
-
-
-def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """Within the paper's structure, what the measurements recommend (bench/preset_sweep.py):
-    the paper's settings (R, rho, P(0)) with these changes.
-
-    Same RLS-identified perturbation model and optimal control of it, same feedforward, with
-    changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
-    with Q = 0.1 I weighs next-step position ~ (T/2)^2 as much as velocity, so a payload's
-    gravity builds up as position error), a 3-step receding horizon over the identified model,
-    integral action on the position error, the RLS wind-up guard, and a projection that refuses
-    RLS steps making a diagonal entry of Ĝ's velocity block (≈ T D⁻¹) non-positive (a payload
-    picked up mid-motion otherwise flips Ĝ and the law saturates).
-    """
-    return {
-        **paper_settings(alpha),
-        "q_position": 2000.0,
-        "q_velocity": 1.0,
-        "trace_max": 0.0,
-        "horizon": 3,
-        "q_integral": 1e6,
-        "integral_limit": 0.05,
-        "project_g": True,
-    }
-
-
-def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """The recommended preset for an arm behind a drive: a command applied one period late, the
-    velocity differenced from encoder positions, joint friction (``bench/effects_sweep.py``).
-
-    The identified model carries the delay (``command_delay``) and the two-period input of a
-    differenced velocity (``input_periods``), and no identification step is taken while a joint
-    sticks (``identify_min_speed``). Measured on the 3-joint PUMA 560 with all of
-    :func:`apc_plant_sim.effects.puma560_effects` on, it beats computed torque and PID on every
-    joint of cases (a)-(c) and the pickup; it is not robust to other combinations (README).
-    """
-    return {
-        **recommended_settings(alpha),
-        "command_delay": 1,
-        "input_periods": 2,
-        "identify_min_speed": 0.05,
-    }
-
-
-PRESETS = {
-    "paper": paper_settings,
-    "recommended": recommended_settings,
-    "physical": physical_settings,
-}
 
 
 def joint_sign_to_paper(n: int) -> np.ndarray:

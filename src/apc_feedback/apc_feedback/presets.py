@@ -1,0 +1,117 @@
+"""Named settings of the adaptive law, and the node parameters they are the defaults of.
+
+``recommended`` is what the feedback node and every command start with: the paper's law with
+the changes measured to work (:func:`recommended_settings`); ``paper`` is the law as printed
+(:func:`paper_settings`), ``physical`` the recommended one for an arm behind a drive. The node's
+``preset`` parameter picks one; an ``adaptive.*`` parameter given as well overrides its value.
+Plain Python: no rclpy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+from apc_core.params import ConfigError, Param
+from apc_feedback.laws import LAW_PARAMS, LAWS
+
+
+def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """The printed adaptive settings: Q = 0.1 I, R = 1e-6 I, rho = 0.95, P(0) = alpha I.
+
+    As printed, the RLS has no wind-up guard (``trace_max < 0``); the corrected Eqs. 30, 33b
+    and 35 are used (their modules, ``rls``, ``linearize`` and ``optimal``, say why).
+    """
+    return {
+        "q_position": 0.1,
+        "q_velocity": 0.1,
+        "r": 1e-6,
+        "rho": 0.95,
+        "alpha": alpha,
+        "trace_max": -1.0,
+    }
+
+
+def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """Within the paper's structure, what the measurements recommend (``bench/preset_sweep.py``):
+    the paper's settings (R, rho, P(0)) with these changes.
+
+    Same RLS-identified perturbation model and optimal control of it, same feedforward, with
+    changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
+    with Q = 0.1 I weighs next-step position ~ (T/2)^2 as much as velocity, so a payload's
+    gravity builds up as position error), a 3-step receding horizon over the identified model,
+    integral action on the position error, the RLS wind-up guard, and a projection that refuses
+    RLS steps making a diagonal entry of Ĝ's velocity block (≈ T D⁻¹) non-positive (a payload
+    picked up mid-motion otherwise flips Ĝ and the law saturates).
+    """
+    return {
+        **paper_settings(alpha),
+        "q_position": 2000.0,
+        "q_velocity": 1.0,
+        "trace_max": 0.0,
+        "horizon": 3,
+        "q_integral": 1e6,
+        "integral_limit": 0.05,
+        "project_g": True,
+    }
+
+
+def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
+    """The recommended preset for an arm behind a drive: a command applied one period late, the
+    velocity differenced from encoder positions, joint friction (``bench/effects_sweep.py``).
+
+    The identified model carries the delay (``command_delay``) and the two-period input of a
+    differenced velocity (``input_periods``), and no identification step is taken while a joint
+    sticks (``identify_min_speed``). Measured on the 3-joint PUMA 560 with all of
+    ``apc_plant_sim.effects.puma560_effects`` on, it beats computed torque and PID on every
+    joint of cases (a)-(c) and the pickup; it is not robust to other combinations (README).
+    """
+    return {
+        **recommended_settings(alpha),
+        "command_delay": 1,
+        "input_periods": 2,
+        "identify_min_speed": 0.05,
+    }
+
+
+PRESETS = {
+    "paper": paper_settings,
+    "recommended": recommended_settings,
+    "physical": physical_settings,
+}
+
+
+#: Each preset by name: ``preset(alpha)`` gives the adaptive settings it changes.
+PRESETS: dict[str, Callable[..., dict[str, Any]]] = {
+    "recommended": recommended_settings,
+    "paper": paper_settings,
+    "physical": physical_settings,
+}
+#: The preset of the feedback node and of the commands when none is named.
+DEFAULT_PRESET = "recommended"
+
+PRESET_PARAM = Param(
+    "preset",
+    DEFAULT_PRESET,
+    f"defaults of the adaptive.* parameters: one of {', '.join(PRESETS)} (recommended: "
+    "measured to work; paper: as printed); an adaptive.* value given as well overrides it",
+)
+
+
+def law_params(preset: str = DEFAULT_PRESET) -> tuple[Param, ...]:
+    """The feedback laws' parameter rows (:data:`LAW_PARAMS`) with the adaptive law's defaults
+    taken from ``preset``; an unknown preset is a :class:`ConfigError` naming ``preset``."""
+    make = PRESETS.get(preset)
+    if make is None:
+        raise ConfigError(
+            f"parameter 'preset': must be one of {', '.join(PRESETS)}, got {preset!r}"
+        )
+    family = LAWS["adaptive"].family
+    values = {family + key: value for key, value in make().items()}
+    return tuple(
+        dataclasses.replace(row, default=type(row.default)(values[row.name]))
+        if row.name in values
+        else row
+        for row in LAW_PARAMS
+    )

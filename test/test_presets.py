@@ -1,0 +1,90 @@
+"""The adaptive law's presets: ``recommended`` by default, ``paper`` one parameter away."""
+
+from __future__ import annotations
+
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+
+from apc_core.params import ConfigError
+from apc_feedback.controller import AdaptiveConfig
+from apc_feedback.node import PARAMS, FeedbackNode
+from apc_feedback.presets import DEFAULT_PRESET, PRESETS, law_params
+from apc_plant_sim.experiment import RunSpec, build_parser, law_parameters, spec_from_args
+from apc_plant_sim.scenario import paper_scenario, paper_settings, recommended_settings
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture(scope="module")
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def node_with(context):
+    made = []
+
+    def make(**overrides) -> FeedbackNode:
+        node = FeedbackNode(
+            context=context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+        )
+        made.append(node)
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+def test_the_recommended_preset_is_the_default_everywhere():
+    assert DEFAULT_PRESET == "recommended"
+    shown = {p.name: p.default for p in PARAMS}
+    assert shown["preset"] == "recommended"
+    for key, value in recommended_settings().items():
+        assert shown[f"adaptive.{key}"] == value, key
+    assert build_parser().parse_args([]).preset == "recommended"
+
+
+def test_the_node_starts_with_the_recommended_law(node_with):
+    config = node_with().law.settings
+    for key, value in recommended_settings().items():
+        assert getattr(config, key) == value, key
+
+
+def test_the_paper_preset_is_one_parameter_away_and_a_setting_overrides_it(node_with):
+    config = node_with(preset="paper").law.settings
+    for key, value in paper_settings().items():
+        assert getattr(config, key) == value, key
+    # What the paper preset leaves alone is the law's own default (one step, no integral).
+    assert config.horizon == AdaptiveConfig.horizon and config.q_integral == 0.0
+    assert (
+        node_with(**{"preset": "paper", "adaptive.q_position": 5.0}).law.settings.q_position == 5.0
+    )
+
+
+def test_an_unknown_preset_stops_the_node_naming_it(node_with):
+    with pytest.raises(ConfigError, match=r"^parameter 'preset': must be one of"):
+        node_with(preset="fast")
+    with pytest.raises(ConfigError, match="preset"):
+        law_params("fast")
+
+
+@pytest.mark.parametrize("preset", sorted(PRESETS))
+def test_a_run_gives_the_node_every_setting_so_its_preset_does_not_matter(preset):
+    settings = PRESETS[preset]()
+    params = RunSpec(paper_scenario("c"), "adaptive", settings).node_parameters()
+    feedback = params["feedback_node"]
+    written = {k.removeprefix("adaptive."): v for k, v in feedback.items() if "adaptive." in k}
+    expected = AdaptiveConfig.from_dict({"period": 0.01, **settings})
+    for key, value in written.items():
+        assert getattr(expected, key) == value, key
+    assert {f"adaptive.{k}" for k in written} == set(law_parameters("adaptive", {})) - {
+        "controller"
+    }
+    args = build_parser().parse_args(["--preset", preset])
+    assert spec_from_args(args).settings == settings
