@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
@@ -11,7 +13,12 @@ from apc_feedback.controller import AdaptiveConfig
 from apc_feedback.node import PARAMS, FeedbackNode
 from apc_feedback.presets import DEFAULT_PRESET, PRESETS, law_params
 from apc_plant_sim.experiment import RunSpec, build_parser, law_parameters, spec_from_args
-from apc_plant_sim.scenario import paper_scenario, paper_settings, recommended_settings
+from apc_plant_sim.scenario import (
+    CONFIG_DIR,
+    paper_scenario,
+    paper_settings,
+    recommended_settings,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -88,3 +95,26 @@ def test_a_run_gives_the_node_every_setting_so_its_preset_does_not_matter(preset
     }
     args = build_parser().parse_args(["--preset", preset])
     assert spec_from_args(args).settings == settings
+
+
+def _feedback_from_files(*files: str) -> dict:
+    context = rclpy.Context()
+    args = ["--ros-args"] + [a for f in files for a in ("--params-file", str(CONFIG_DIR / f))]
+    rclpy.init(args=args, context=context)
+    node = None
+    try:
+        node = FeedbackNode(context=context)
+        return dataclasses.asdict(node.law.settings)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_the_shipped_file_runs_the_recommended_preset_and_the_paper_file_the_printed_one():
+    recommended = _feedback_from_files("puma560_3dof.yaml")
+    for key, value in recommended_settings().items():
+        assert recommended[key] == value, key
+    paper = _feedback_from_files("puma560_3dof.yaml", "puma560_3dof_paper.yaml")
+    for key, value in paper_settings().items():
+        assert paper[key] == value, key
