@@ -23,29 +23,23 @@ from apc_plant_sim.scenario import (
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture(scope="module")
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
-@pytest.fixture
-def node_with(context):
-    made = []
-
-    def make(**overrides) -> FeedbackNode:
+def _feedback(*files: str, **overrides) -> AdaptiveConfig:
+    """The adaptive law's settings of a feedback node started from ``files`` (in apc's config
+    directory) and parameter ``overrides``."""
+    context = rclpy.Context()
+    args = ["--ros-args"] + [a for f in files for a in ("--params-file", str(CONFIG_DIR / f))]
+    rclpy.init(args=args, context=context)
+    node = None
+    try:
         node = FeedbackNode(
             context=context,
             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
         )
-        made.append(node)
-        return node
-
-    yield make
-    for node in made:
-        node.destroy_node()
+        return node.law.settings
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 def test_the_recommended_preset_is_the_default_everywhere():
@@ -57,26 +51,24 @@ def test_the_recommended_preset_is_the_default_everywhere():
     assert build_parser().parse_args([]).preset == "recommended"
 
 
-def test_the_node_starts_with_the_recommended_law(node_with):
-    config = node_with().law.settings
+def test_the_node_starts_with_the_recommended_law():
+    config = _feedback()
     for key, value in recommended_settings().items():
         assert getattr(config, key) == value, key
 
 
-def test_the_paper_preset_is_one_parameter_away_and_a_setting_overrides_it(node_with):
-    config = node_with(preset="paper").law.settings
+def test_the_paper_preset_is_one_parameter_away_and_a_setting_overrides_it():
+    config = _feedback(preset="paper")
     for key, value in paper_settings().items():
         assert getattr(config, key) == value, key
     # What the paper preset leaves alone is the law's own default (one step, no integral).
     assert config.horizon == AdaptiveConfig.horizon and config.q_integral == 0.0
-    assert (
-        node_with(**{"preset": "paper", "adaptive.q_position": 5.0}).law.settings.q_position == 5.0
-    )
+    assert _feedback(**{"preset": "paper", "adaptive.q_position": 5.0}).q_position == 5.0
 
 
-def test_an_unknown_preset_stops_the_node_naming_it(node_with):
+def test_an_unknown_preset_stops_the_node_naming_it():
     with pytest.raises(ConfigError, match=r"^parameter 'preset': must be one of"):
-        node_with(preset="fast")
+        _feedback(preset="fast")
     with pytest.raises(ConfigError, match="preset"):
         law_params("fast")
 
@@ -97,24 +89,10 @@ def test_a_run_gives_the_node_every_setting_so_its_preset_does_not_matter(preset
     assert spec_from_args(args).settings == settings
 
 
-def _feedback_from_files(*files: str) -> dict:
-    context = rclpy.Context()
-    args = ["--ros-args"] + [a for f in files for a in ("--params-file", str(CONFIG_DIR / f))]
-    rclpy.init(args=args, context=context)
-    node = None
-    try:
-        node = FeedbackNode(context=context)
-        return dataclasses.asdict(node.law.settings)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-
-
 def test_the_shipped_file_runs_the_recommended_preset_and_the_paper_file_the_printed_one():
-    recommended = _feedback_from_files("puma560_3dof.yaml")
+    recommended = dataclasses.asdict(_feedback("puma560_3dof.yaml"))
     for key, value in recommended_settings().items():
         assert recommended[key] == value, key
-    paper = _feedback_from_files("puma560_3dof.yaml", "puma560_3dof_paper.yaml")
+    paper = dataclasses.asdict(_feedback("puma560_3dof.yaml", "puma560_3dof_paper.yaml"))
     for key, value in paper_settings().items():
         assert paper[key] == value, key
