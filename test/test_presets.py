@@ -96,3 +96,20 @@ def test_the_shipped_file_runs_the_recommended_preset_and_the_paper_file_the_pri
     paper = dataclasses.asdict(_feedback("puma560_3dof.yaml", "puma560_3dof_paper.yaml"))
     for key, value in paper_settings().items():
         assert paper[key] == value, key
+
+
+@pytest.mark.parametrize("preset", ["recommended", "paper"])
+def test_robot_node_takes_the_same_presets(preset):
+    from apc_feedback.robot_node import RobotNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = None
+    try:
+        node = RobotNode(context=context, parameter_overrides=[Parameter("preset", value=preset)])
+        for key, value in PRESETS[preset]().items():
+            assert node.get_parameter(f"adaptive.{key}").value == value, key
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -41,7 +41,7 @@ from apc_core.nodeutil import (
 from apc_core.params import ConfigError, Param, declare
 from apc_feedback.controller import FeedbackError
 from apc_feedback.laws import LawParameters
-from apc_feedback.presets import PRESET_PARAM, law_params
+from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.sampling import (
     Decision,
     GridSampler,
@@ -65,7 +65,7 @@ class FeedbackNode(Node):
         qos = qos or wire.CONTROL_QOS
         # The preset first: it gives the adaptive.* parameters their defaults.
         preset = declare(self, (PRESET_PARAM,))[PRESET_PARAM.name]
-        values = declare(self, (*CONTROLLER_ROBOT_PARAMS, *law_params(preset)))
+        values = declare(self, preset_rows(PARAMS, preset))
         robot = controller_robot_from_params(values)
         self.joint_names = robot.joint_names
         self.laws = LawParameters(values, robot)

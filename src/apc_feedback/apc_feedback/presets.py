@@ -10,7 +10,7 @@ Plain Python: no rclpy.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from apc_core.params import ConfigError, Param
@@ -99,19 +99,30 @@ PRESET_PARAM = Param(
 )
 
 
-def law_params(preset: str = DEFAULT_PRESET) -> tuple[Param, ...]:
-    """The feedback laws' parameter rows (:data:`LAW_PARAMS`) with the adaptive law's defaults
-    taken from ``preset``; an unknown preset is a :class:`ConfigError` naming ``preset``."""
+def preset_rows(params: Iterable[Param], preset: str = DEFAULT_PRESET) -> tuple[Param, ...]:
+    """``params`` without the ``preset`` row, each adaptive setting's default taken from
+    ``preset``: what a node declares once it has read its preset. An unknown preset is a
+    :class:`ConfigError` naming ``preset``."""
     make = PRESETS.get(preset)
     if make is None:
         raise ConfigError(
             f"parameter 'preset': must be one of {', '.join(PRESETS)}, got {preset!r}"
         )
     family = LAWS["adaptive"].family
-    values = {family + key: value for key, value in make().items()}
+    # What a preset leaves out is the law's own default (AdaptiveConfig's), not another
+    # preset's: ``params`` may carry the default preset's values already.
+    values = {row.name: row.default for row in LAW_PARAMS if row.name.startswith(family)}
+    values.update({family + key: value for key, value in make().items()})
     return tuple(
         dataclasses.replace(row, default=type(row.default)(values[row.name]))
         if row.name in values
         else row
-        for row in LAW_PARAMS
+        for row in params
+        if row.name != PRESET_PARAM.name
     )
+
+
+def law_params(preset: str = DEFAULT_PRESET) -> tuple[Param, ...]:
+    """The feedback laws' parameter rows (:data:`LAW_PARAMS`) with the adaptive law's defaults
+    taken from ``preset``."""
+    return preset_rows(LAW_PARAMS, preset)

@@ -58,7 +58,8 @@ from apc_core.nodeutil import (
     run_nodes,
 )
 from apc_core.params import ConfigError, Param, declare, params_from
-from apc_feedback.laws import LAW_PARAMS, LawParameters
+from apc_feedback.laws import LawParameters
+from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig, RobotSamplingError
 
@@ -66,8 +67,10 @@ AUTOSTART_FLAG = "--autostart"
 
 PARAMS: tuple[Param, ...] = (
     *CONTROLLER_ROBOT_PARAMS,
-    # The law's parameters, all read at configure (none changes while active).
-    *(replace(p, read_only=True) for p in LAW_PARAMS),
+    # The law's parameters, all read at configure (none changes while active); the preset
+    # gives the adaptive ones their defaults (shown here: the default preset's).
+    PRESET_PARAM,
+    *(replace(p, read_only=True) for p in law_params()),
     Param(
         "command_topic",
         "/effort_controller/commands",
@@ -107,7 +110,8 @@ class RobotNode(LifecycleNode):
 
     def __init__(self, node_name: str = "robot_node", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self._declared = declare(self, PARAMS)
+        preset = declare(self, (PRESET_PARAM,))[PRESET_PARAM.name]
+        self._declared = declare(self, preset_rows(PARAMS, preset))
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self.diagnostics.message = "unconfigured"
         DiagnosticsPublisher(self, self.diagnostics)
