@@ -22,14 +22,14 @@ A, B = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
 
 
 def intake(lockstep: bool, watchdog_ns: int = 5 * T) -> TorqueIntake:
-    result = TorqueIntake(T, lockstep, N, watchdog_ns)
+    result = TorqueIntake(T, lockstep, watchdog_ns)
     result.started = True
     return result
 
 
 @pytest.mark.parametrize("lockstep", [True, False])
 def test_nothing_is_taken_before_sample_0_is_sent(lockstep):
-    got = TorqueIntake(T, lockstep, N, 5 * T)
+    got = TorqueIntake(T, lockstep, 5 * T)
     with pytest.raises(wire.WireError, match="not a sample the plant sent"):
         got.take(NOMINAL, 0, A, 0)
 

@@ -82,16 +82,14 @@ class TorqueIntake:
         Sampling period T (ns); stamps are ``kT``.
     lockstep : bool
         Lockstep (every torque of every sample, in order) or real time (the newest torques).
-    n_joints : int
     watchdog_ns : int
         Real time: a torque answering sample ``j`` is fresh up to the sample stamped
         ``jT + watchdog_ns``.
     """
 
-    def __init__(self, period_ns: int, lockstep: bool, n_joints: int, watchdog_ns: int) -> None:
+    def __init__(self, period_ns: int, lockstep: bool, watchdog_ns: int) -> None:
         self.period_ns = period_ns
         self.lockstep = lockstep
-        self.n_joints = n_joints
         self.watchdog_ns = watchdog_ns
         #: The plant sent sample 0: before that no controller can have computed a torque.
         self.started = False
@@ -206,5 +204,5 @@ class TorqueIntake:
         ends, self.braking = self.braking, False
         if fb_fresh and fb is not None:
             return Tick(Action.BOTH, ff[1] + fb[1], missing, late, braking_ends=ends)
-        tau = ff[1] + np.zeros(self.n_joints)
+        tau = ff[1] + np.zeros_like(ff[1])
         return Tick(Action.NOMINAL_ONLY, tau, missing, late, braking_ends=ends)

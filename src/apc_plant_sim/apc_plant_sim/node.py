@@ -8,10 +8,9 @@ integrates (RK4, :mod:`apc_plant_sim.plant`).
 Modes
 -----
 ``lockstep`` (deterministic; what ``experiment`` uses)
-    The plant owns time. It advances only when it holds
-    both torques stamped ``kT``. If they do not come within ``resend_s`` it re-sends
-    ``joint_states(k)`` (the controllers answer from a cache); after ``lockstep_timeout_s``
-    the run ends with a clear error instead of hanging.
+    The plant owns time. It advances only when it holds both torques stamped ``kT``. If they
+    do not come within ``resend_s`` it re-sends ``joint_states(k)`` (the controllers answer
+    from a cache); after ``lockstep_timeout_s`` the run ends with a clear error.
 ``realtime`` (a robot's reality; the default for ``ros2 run``)
     A wall timer of period T steps the arm with the newest torques it holds. Torques stamped
     earlier than the sample are *late*, none at all *missing*; both are counted, never waited
@@ -100,16 +99,6 @@ PARAMS: tuple[Param, ...] = (
 )
 
 
-def best_effort(qos: QoSProfile) -> QoSProfile:
-    """``qos`` with BEST_EFFORT reliability (matches RELIABLE publishers, never blocks)."""
-    return QoSProfile(
-        history=qos.history,
-        depth=qos.depth,
-        reliability=ReliabilityPolicy.BEST_EFFORT,
-        durability=qos.durability,
-    )
-
-
 class PlantNode(Node):
     """Composable plant node (see module docstring).
 
@@ -129,7 +118,6 @@ class PlantNode(Node):
         values = declare(self, PARAMS)
         robot = robot_from_params(values)
         self.joint_names = robot.joint_names
-        n = robot.n_joints
         self.mode = values["mode"]
         if self.mode not in MODES:
             raise ConfigError(
@@ -147,12 +135,8 @@ class PlantNode(Node):
         self.diagnostics.set("mode", self.mode)
         self.done = False
         self.exit_code = 0
-        self.intake = TorqueIntake(
-            self.period_ns,
-            self.mode == "lockstep",
-            n,
-            wire.seconds_to_ns(values["watchdog_s"]),
-        )
+        watchdog_ns = wire.seconds_to_ns(values["watchdog_s"])
+        self.intake = TorqueIntake(self.period_ns, self.mode == "lockstep", watchdog_ns)
         self._applied: np.ndarray | None = None
         self.pacer = StatePacer(
             values["resend_s"], values["lockstep_timeout_s"], now=time.monotonic()
@@ -173,7 +157,10 @@ class PlantNode(Node):
         # blocking: 50-110 ms with FastDDS's defaults on a link with 1 % loss, longer than the
         # watchdog, so the arm braked mid-move). Best effort matches the controllers' reliable
         # publishers and hands over what arrives. Lockstep needs every sample: reliable.
-        torque_qos = qos if self.mode == "lockstep" else best_effort(qos)
+        torque_qos = qos
+        if self.mode != "lockstep":
+            torque_qos = QoSProfile(history=qos.history, depth=qos.depth, durability=qos.durability)
+            torque_qos.reliability = ReliabilityPolicy.BEST_EFFORT
         self.ff_sub, self.fb_sub = (
             self.create_subscription(
                 JointState,
@@ -273,10 +260,8 @@ class PlantNode(Node):
     def _missing_peers(self) -> str:
         """The peers sample 0 waits for that are not there ("" when all are)."""
         missing = []
-        subscribers, wanted = (
-            self.js_pub.get_subscription_count(),
-            self._values["wait_for_subscribers"],
-        )
+        subscribers = self.js_pub.get_subscription_count()
+        wanted = self._values["wait_for_subscribers"]
         if subscribers < wanted:
             missing.append(f"{subscribers} of {wanted} subscribers on {wire.JOINT_STATES}")
         for source, sub in zip(Source, (self.ff_sub, self.fb_sub), strict=True):
@@ -314,10 +299,8 @@ class PlantNode(Node):
                 result = self.plant.step(tau)
             except PlantError as exc:
                 reject(self, self.diagnostics, "integrate", exc)
-                result = None
-        if result is None:
-            self._applied = np.zeros(len(self.joint_names))
-            return
+                self._applied = np.zeros(len(self.joint_names))
+                return
         self._applied = result.applied
         if result.saturated.any():
             self.diagnostics.count("saturated_samples")
@@ -339,14 +322,22 @@ class PlantNode(Node):
                 self._publish_state()  # sample 0 again, until both controllers answer it
             return
         diag = self.diagnostics
-        for source in tick.missing:
-            diag.count(f"missing.{source.value}")
-        for source in tick.late:
-            diag.count(f"late.{source.value}")
+        for kind, sources in (("missing", tick.missing), ("late", tick.late)):
+            for source in sources:
+                diag.count(f"{kind}.{source.value}")
         if tick.missing or tick.late:
             diag.count("late_samples")
         if tick.action is Action.BRAKE:
-            self._brake(tick.braking_starts)
+            if tick.braking_starts:
+                self.get_logger().error(
+                    f"no fresh nominal torque for {self._values['watchdog_s']} s: braking"
+                )
+                diag.count("watchdog_trips")
+            diag.level = DiagnosticStatus.ERROR
+            diag.message = "no nominal torque: brakes engaged (holding position)"
+            self.plant.brake()
+            self._applied = np.zeros(len(self.joint_names))
+            diag.count("braked_samples")
         else:
             if tick.braking_ends:
                 self.get_logger().info("nominal torque back: releasing the brake")
@@ -367,18 +358,6 @@ class PlantNode(Node):
         self._publish_state()
         if self.n_samples and self.k >= self.n_samples:
             self._finish()
-
-    def _brake(self, starts: bool) -> None:
-        if starts:
-            self.get_logger().error(
-                f"no fresh nominal torque for {self._values['watchdog_s']} s: braking"
-            )
-            self.diagnostics.count("watchdog_trips")
-        self.diagnostics.level = DiagnosticStatus.ERROR
-        self.diagnostics.message = "no nominal torque: brakes engaged (holding position)"
-        self.plant.brake()
-        self._applied = np.zeros(len(self.joint_names))
-        self.diagnostics.count("braked_samples")
 
 
 def main(args: list[str] | None = None) -> int:
