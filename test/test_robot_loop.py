@@ -265,3 +265,18 @@ def test_closed_loop_tracks_the_papers_move_from_the_measured_position():
     assert np.rad2deg(np.max(np.abs(final - np.deg2rad([90.0, 45.0, -135.0])))) < 0.5
     errors = [np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in log if len(e) == 3]
     assert max(errors) < 1.0
+
+
+def test_a_failing_law_step_sends_no_command_and_is_counted():
+    loop, counts, logs = _loop()
+
+    def fail(*args):
+        raise ValueError("state error is not finite")
+
+    loop.law.update = fail
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.activate(t)
+    loop.tick(t)
+    assert loop.on_setpoint(_setpoint(100, 0.0), start=True).command is None
+    assert counts["feedback_law_errors"] == 1 and logs[-1][0] == "error"

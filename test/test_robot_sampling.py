@@ -10,8 +10,10 @@ from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
+    StateRejectedError,
     VelocityEstimator,
 )
+from apc_feedback.sampling import JointStateSampler
 
 MS = 1_000_000
 T = 10 * MS
@@ -35,16 +37,27 @@ def test_config_names_the_bad_field():
         RobotSamplingConfig(velocity_window=float("nan"))
 
 
+def _rejected(sampler, state, now) -> str:
+    with pytest.raises(StateRejectedError) as caught:
+        sampler.offer(state, now)
+    return caught.value.reason
+
+
+def test_it_is_a_joint_state_sampler_that_ticks():
+    s: JointStateSampler = _sampler()
+    assert s.ticking and s.offer(_state(0, 0.0, 0.0), 0) is None
+
+
 def test_duplicate_out_of_order_stale_and_future_are_rejected():
     s = _sampler(max_age=0.02)
     now = 1000 * T
-    assert s.offer(_state(now - 2 * MS, 0.0, 0.0), now) == ""
-    assert s.offer(_state(now - 2 * MS, 1.0, 0.0), now) == "duplicate"
-    assert s.offer(_state(now - 3 * MS, 1.0, 0.0), now) == "out_of_order"
-    assert s.offer(_state(now - 21 * MS, 1.0, 0.0), now + 0) == "out_of_order"
+    assert s.offer(_state(now - 2 * MS, 0.0, 0.0), now) is None
+    assert _rejected(s, _state(now - 2 * MS, 1.0, 0.0), now) == "duplicate"
+    assert _rejected(s, _state(now - 3 * MS, 1.0, 0.0), now) == "out_of_order"
+    assert _rejected(s, _state(now - 21 * MS, 1.0, 0.0), now) == "out_of_order"
     s2 = _sampler(max_age=0.02)
-    assert s2.offer(_state(now - 21 * MS, 1.0, 0.0), now) == "stale"
-    assert s2.offer(_state(now + 21 * MS, 1.0, 0.0), now) == "future"
+    assert _rejected(s2, _state(now - 21 * MS, 1.0, 0.0), now) == "stale"
+    assert _rejected(s2, _state(now + 21 * MS, 1.0, 0.0), now) == "future"
     assert s2.newest is None
     # the first one stands: a rejected state never replaces it
     assert s.newest.position[0] == 0.0
@@ -62,7 +75,8 @@ def test_samples_are_grid_stamped_from_the_newest_state_carried_forward_to_the_t
     s.offer(_state(t0 - 1 * MS, ramp(t0 - 1 * MS)), t0)
     k0 = s.start(t0)
     assert k0 == 1234
-    take = s.tick(t0)  # two states: carried forward by their slope to t0
+    s.tick(t0)  # two states: carried forward by their slope to t0
+    take = s.last
     assert take.k == 1234 and take.sample.stamp_ns == 1234 * T
     assert take.age_ns == 1 * MS and take.missed == 0 and take.reason == ""
     slope = (ramp(t0 - MS) - ramp(t0 - 2 * MS)) / 1e-3
@@ -70,7 +84,8 @@ def test_samples_are_grid_stamped_from_the_newest_state_carried_forward_to_the_t
     # two states within the next period: the newer one is taken, carried forward exactly
     s.offer(_state(t0 + 4 * MS, ramp(t0 + 4 * MS)), t0 + 4 * MS)
     s.offer(_state(t0 + 8 * MS, ramp(t0 + 8 * MS)), t0 + 8 * MS)
-    take = s.tick(t0 + T + 1 * MS)  # timer 1 ms late: still sample k0 + 1, at its own time
+    s.tick(t0 + T + 1 * MS)  # timer 1 ms late: still sample k0 + 1, at its own time
+    take = s.last
     assert take.k == k0 + 1 and take.age_ns == 3 * MS and take.late_ns == 1 * MS
     assert take.sample.position[0] == pytest.approx(ramp(t0 + T))
     assert take.sample.velocity[0] == pytest.approx(2.0 + 10.0 * 0.010)
@@ -81,14 +96,17 @@ def test_no_new_state_stale_and_missed_ticks_leave_gaps():
     t0 = 500 * T
     s.offer(_state(t0, 0.0, 0.0), t0)
     k0 = s.start(t0)
-    assert s.tick(t0).sample is not None
-    take = s.tick(t0 + T)  # nothing new since: no sample, nothing reaches a law twice
+    assert s.tick(t0) is not None
+    s.tick(t0 + T)  # nothing new since: no sample, nothing reaches a law twice
+    take = s.last
     assert take.sample is None and take.reason == "no_new_state" and take.k == k0 + 1
     s.offer(_state(t0 + T + 5 * MS, 0.1, 0.0), t0 + T + 5 * MS)
-    take = s.tick(t0 + 4 * T)  # two ticks never ran; the state is 25 ms old by now
+    s.tick(t0 + 4 * T)  # two ticks never ran; the state is 25 ms old by now
+    take = s.last
     assert take.k == k0 + 4 and take.missed == 2 and take.reason == "stale"
     s.offer(_state(t0 + 5 * T - MS, 0.2, 0.0), t0 + 5 * T)
-    take = s.tick(t0 + 5 * T + 4 * MS)  # jitter below T/2 keeps the index
+    s.tick(t0 + 5 * T + 4 * MS)  # a timer late by less than T keeps the index
+    take = s.last
     assert take.k == k0 + 5 and take.sample is not None and take.missed == 0
 
 
@@ -100,7 +118,8 @@ def test_restart_continues_after_the_last_sample():
     s.tick(t0)
     k1 = s.start(t0 + 2 * MS)  # re-activated within the same period
     assert k1 == k0 + 1
-    assert s.tick(t0 + 2 * MS).k == k1
+    s.tick(t0 + 2 * MS)
+    assert s.last.k == k1
 
 
 def test_watchdog_is_on_the_newest_accepted_stamp():
@@ -154,9 +173,9 @@ def test_the_drivers_velocity_is_used_when_sent_and_estimated_when_not():
     s.offer(_state(0, 0.0), 0)
     assert s.newest.velocity is None
     s.start(0)
-    assert s.tick(0).reason == "no_velocity"
+    assert s.tick(0) is None and s.last.reason == "no_velocity"
     s.offer(_state(5 * MS, 0.01), 5 * MS)
     assert s.newest.velocity == pytest.approx([2.0])
-    assert s.tick(5 * MS).sample.velocity == pytest.approx([2.0])
+    assert s.tick(5 * MS).velocity == pytest.approx([2.0])
     s.offer(_state(10 * MS, 0.02, 7.0), 10 * MS)
     assert s.newest.velocity == pytest.approx([7.0])

@@ -172,9 +172,10 @@ class RobotLoop:
         self.last_late_ns = 0  # how late the last tick was after its sample's time
 
     # -- inputs ---------------------------------------------------------------------------------
-    def on_joint_state(self, state: JointSample, now_ns: int) -> str:
-        """A validated joint state (model order); the reason it was rejected, or ""."""
-        return self.sampler.offer(state, now_ns)
+    def on_joint_state(self, state: JointSample, now_ns: int) -> None:
+        """A validated joint state (model order); raises
+        :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be sampled."""
+        self.sampler.offer(state, now_ns)
 
     def activate(self, now_ns: int) -> None:
         """Start sampling at ``now`` with a start (hold the measured position)."""
@@ -204,7 +205,8 @@ class RobotLoop:
             self.count("watchdog")
             self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
             return Step(command=self._hold_command())
-        take = self.sampler.tick(now_ns)
+        self.sampler.tick(now_ns)
+        take = self.sampler.last
         self.last_age_ns, self.last_late_ns = take.age_ns, take.late_ns
         if take.missed:
             self.count("missed_ticks")

@@ -61,7 +61,7 @@ from apc_core.params import ConfigError, Param, declare, params_from
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
-from apc_feedback.robot_sampling import RobotSamplingConfig, RobotSamplingError
+from apc_feedback.robot_sampling import RobotSamplingConfig, RobotSamplingError, StateRejectedError
 
 AUTOSTART_FLAG = "--autostart"
 
@@ -264,10 +264,11 @@ class RobotNode(LifecycleNode):
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
-        reason = loop.on_joint_state(sample, self._now())
-        if reason:
-            self.diagnostics.count(reason)
-            reject(self, self.diagnostics, wire.JOINT_STATES, wire.WireError(f"{reason} state"))
+        try:
+            loop.on_joint_state(sample, self._now())
+        except StateRejectedError as exc:
+            self.diagnostics.count(exc.reason)
+            reject(self, self.diagnostics, wire.JOINT_STATES, exc)
 
     def _on_setpoint(self, msg: JointTrajectory) -> None:
         loop = self.loop

@@ -54,7 +54,16 @@ import numpy as np
 
 from apc_core.params import SettingError, check_settings, setting
 from apc_core.robot import PAPER_PERIOD_S
-from apc_core.wire import JointSample, seconds_to_ns
+from apc_core.wire import JointSample, WireError, seconds_to_ns
+
+
+class StateRejectedError(WireError):
+    """A joint state that cannot be sampled; ``reason`` is its counter's name (``duplicate``,
+    ``out_of_order``, ``stale``, ``future``)."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class RobotSamplingError(SettingError):
@@ -173,10 +182,15 @@ class Take(NamedTuple):
 class RobotSampler:
     """Samples a driver's joint states on the controllers' clock (see the module docstring).
 
-    :meth:`offer` every joint state as it arrives, :meth:`start` at activation, :meth:`tick`
-    on every timer call. The newest state is kept across :meth:`start` (a re-activation
-    samples the position the arm has then).
+    The robot implementation of :class:`apc_feedback.sampling.JointStateSampler`:
+    :meth:`offer` every joint state as it arrives (it keeps the newest, returns None and
+    raises :class:`StateRejectedError` for one that cannot be sampled), :meth:`start` at
+    activation, :meth:`tick` on every timer call (the sample due, or None; :attr:`last` says
+    which sample, how old its state was and why none was taken). The newest state is kept
+    across :meth:`start` (a re-activation samples the position the arm has then).
     """
+
+    ticking = True
 
     def __init__(self, config: RobotSamplingConfig) -> None:
         self.config = config
@@ -189,24 +203,43 @@ class RobotSampler:
         self._taken_stamp: int | None = None  # driver stamp of the last sample's state
         self._phase_ns = 0
         self._last_k: int | None = None
+        self.last = Take(-1, None, -1, "no_state", 0)  # what the newest tick did
 
-    def offer(self, state: JointSample, now_ns: int) -> str:
-        """Take in a validated joint state (finite, in model order); a reject reason or ""."""
+    def offer(self, state: JointSample, now_ns: int) -> None:
+        """Take in a validated joint state (finite, in model order); never a sample by itself.
+
+        Raises
+        ------
+        StateRejectedError
+            A duplicate or out-of-order stamp, or one more than ``max_age`` from ``now``.
+        """
         newest = self.newest
         stamp = state.stamp_ns
         if newest is not None and stamp <= newest.stamp_ns:
-            return "duplicate" if stamp == newest.stamp_ns else "out_of_order"
+            reason = "duplicate" if stamp == newest.stamp_ns else "out_of_order"
+            raise StateRejectedError(
+                f"header.stamp: {stamp} ns, the newest state is {newest.stamp_ns} ns ({reason})",
+                reason,
+            )
         if now_ns - stamp > self.max_age_ns:
-            return "stale"
+            raise StateRejectedError(
+                f"header.stamp: {stamp} ns is {(now_ns - stamp) * 1e-6:.3f} ms old, more than "
+                f"max_age (stale)",
+                "stale",
+            )
         if stamp - now_ns > self.max_age_ns:
-            return "future"
+            raise StateRejectedError(
+                f"header.stamp: {stamp} ns is {(stamp - now_ns) * 1e-6:.3f} ms ahead of the "
+                "node's clock (future: the driver's and the controllers' clocks disagree)",
+                "future",
+            )
         assert state.position is not None
         velocity = self.velocity.update(stamp, state.position)
         self._acceleration = self.velocity.acceleration
         if state.velocity is not None:
             velocity = state.velocity
         self.newest = JointSample(stamp, state.position, velocity, state.effort)
-        return ""
+        return None
 
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""
@@ -226,9 +259,13 @@ class RobotSampler:
         self._last_k = k - 1
         return k
 
-    def tick(self, now_ns: int) -> Take:
-        """Take sample ``k`` (the one due at ``now``): the newest joint state carried forward
-        to ``now``."""
+    def tick(self, now_ns: int) -> JointSample | None:
+        """Sample ``k``, the one due at ``now``: the newest joint state carried to the sample's
+        time; None if none can be taken (:attr:`last` says why)."""
+        self.last = self._take(now_ns)
+        return self.last.sample
+
+    def _take(self, now_ns: int) -> Take:
         assert self._last_k is not None, "start() first"
         # Floor: a timer is late, never early; a tick up to T late keeps its index (rounding
         # would name a late tick after the next sample, and every later one a sample ahead).
