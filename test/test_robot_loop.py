@@ -160,10 +160,15 @@ def test_path_tolerance_aborts_a_moving_setpoint_and_restarts_at_the_measured_po
     loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
     loop.tick(t + 2 * T)
     step = loop.on_setpoint(_setpoint(102, 0.3, qd=1.0), start=False)
-    assert step.start and step.sample.stamp_ns == 102 * T and step.command is None
+    assert step == (None, False, None)  # no command: the last one stands
     assert counts["path_tolerance_aborts"] == 1
     assert "joint 'a'" in logs[-1][1]
-    assert loop.on_setpoint(_setpoint(102, 0.0), start=True).command is not None
+    # the next sample is a start; set points of the aborted plan are dropped
+    loop.on_joint_state(_state(t + 3 * T, 0.1), t + 3 * T)
+    step = loop.tick(t + 3 * T)
+    assert step.start and step.sample.stamp_ns == 103 * T and step.command is None
+    assert loop.on_setpoint(_setpoint(104, 0.3, qd=1.0), start=False).command is None
+    assert loop.on_setpoint(_setpoint(103, 0.1), start=True).command is not None
 
 
 def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
@@ -179,7 +184,9 @@ def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
 
 
 # -- the loop closed offline ---------------------------------------------------------------------
-def _closed_loop(duration_s, goal_deg=None, driver_ms=2.0, phase_ms=0.3, payload_kg=2.268):
+def _closed_loop(
+    duration_s, goal_deg=None, driver_ms=2.0, phase_ms=0.3, payload_kg=2.268, pause=None
+):
     """A 500 Hz driver (apc's plant stepping every ``driver_ms``, positions only), the loop
     ticking every T with a phase, and a feedforward answering with lookahead 1 (sim time)."""
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
@@ -236,7 +243,8 @@ def _closed_loop(duration_s, goal_deg=None, driver_ms=2.0, phase_ms=0.3, payload
     activated = False
     while min(t_driver, t_tick) < end:
         if t_driver <= t_tick:
-            loop.on_joint_state(JointSample(t_driver, plant.q.copy(), None, None), t_driver)
+            if not (pause and pause[0] <= (t_driver - t_act) * 1e-9 < pause[1]):
+                loop.on_joint_state(JointSample(t_driver, plant.q.copy(), None, None), t_driver)
             log.append((t_driver, plant.q.copy()))
             plant.step(torque)
             t_driver += dt
@@ -280,3 +288,16 @@ def test_a_failing_law_step_sends_no_command_and_is_counted():
     loop.tick(t)
     assert loop.on_setpoint(_setpoint(100, 0.0), start=True).command is None
     assert counts["feedback_law_errors"] == 1 and logs[-1][0] == "error"
+
+
+def test_closed_loop_stops_the_arm_after_a_watchdog_where_it_is_then():
+    """300 ms without states: the gravity hold lets the arm sag under the payload; when states
+    come back the arm is stopped near where it is (the law keeps what it identified)."""
+    _, log = _closed_loop(2.0, pause=(0.5, 0.8))
+    t0 = log[0][0]
+    q = np.array([entry[1] for entry in log])
+    seconds = np.array([(entry[0] - t0) * 1e-9 for entry in log])
+    back = q[np.searchsorted(seconds, 0.84)]
+    assert np.rad2deg(np.max(np.abs(back - q[0]))) > 1.0  # it did sag
+    assert np.rad2deg(np.max(np.abs(q[seconds > 0.84] - back))) < 10.0
+    assert np.rad2deg(np.ptp(q[seconds > 1.5], axis=0).max()) < 0.05  # at rest

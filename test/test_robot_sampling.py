@@ -116,8 +116,8 @@ def test_restart_continues_after_the_last_sample():
     s.offer(_state(t0, 0.0, 0.0), t0)
     k0 = s.start(t0)
     s.tick(t0)
-    k1 = s.start(t0 + 2 * MS)  # re-activated within the same period
-    assert k1 == k0 + 1
+    k1 = s.start(t0 + 2 * MS)  # re-activated within the same period: one index left out
+    assert k1 == k0 + 2
     s.tick(t0 + 2 * MS)
     assert s.last.k == k1
 
@@ -179,3 +179,16 @@ def test_the_drivers_velocity_is_used_when_sent_and_estimated_when_not():
     assert s.tick(5 * MS).velocity == pytest.approx([2.0])
     s.offer(_state(10 * MS, 0.02, 7.0), 10 * MS)
     assert s.newest.velocity == pytest.approx([7.0])
+
+
+def test_the_velocity_estimate_starts_afresh_after_a_gap_in_the_states():
+    s = _sampler(max_age=0.02)
+    for i in range(5):
+        s.offer(_state(i * MS, 0.001 * i), i * MS)
+    assert s.newest.velocity == pytest.approx([1.0])
+    # 300 ms without states (a watchdog), then the arm is somewhere else, moving at 2 rad/s
+    t = 305 * MS
+    s.offer(_state(t, 0.5), t)
+    assert s.newest.velocity is None  # no difference across the gap
+    s.offer(_state(t + MS, 0.502), t + MS)
+    assert s.newest.velocity == pytest.approx([2.0])

@@ -18,8 +18,11 @@ One sample ``k``:
 Starts. At activation, after a watchdog fault and after a path-tolerance abort, the sample
 goes out flagged as a *start*: the feedforward drops its plan and queued goals and holds that
 sample's measured position (a set point that stays put), and flags the set point that answers
-it. Until that set point arrives every other one is dropped (it belongs to the plan before),
-and the law starts afresh (``reset()``: ``F̂(0), Ĝ(0)`` of Eq. 33 at the held position).
+it. Until that set point arrives every other one is dropped (it belongs to the plan before).
+The law keeps what it identified (the payload it learned is still on the arm): restarted
+with ``F̂(0), Ĝ(0)`` of Eq. 33 and ``P(0)`` on an arm still moving (sagging after a watchdog
+hold) it diverged, with the model kept it stops the arm within a few samples. A start always
+follows a gap in ``k``, so no identification step spans the change of plan.
 
 Faults.
 
@@ -255,13 +258,12 @@ class RobotLoop:
         self._start_stamp = sample.stamp_ns
         self._setpoints.clear()
         self._pending = sample
-        self.law.reset()
         self.count("starts")
         return Step(sample=sample, start=True)
 
     def _try(self) -> Step:
-        """Run the law on the pending sample if its set point is here: the command, or a start
-        (the sample again, flagged) when the path tolerance aborts the goal."""
+        """Run the law on the pending sample if its set point is here: the command; nothing
+        when the path tolerance aborts the goal (the next sample is a start)."""
         sample = self._pending
         if sample is None or self._start_stamp is not None:
             return NOTHING
@@ -283,7 +285,11 @@ class RobotLoop:
                 f"on joint {self.command.model_joints[j]!r} beyond its path tolerance "
                 f"{tolerance[j]:.4g} rad; goal aborted, holding the measured position",
             )
-            return self._start(sample)
+            # The next sample is the start: this one gets no command (the last one stands), so
+            # the law sees a gap and takes no identification step across the change of plan.
+            self._restart = True
+            self._setpoints.clear()
+            return NOTHING
         k = sample.stamp_ns // self.period_ns
         sent = self._sent
         applied = sent[1] if sent is not None and sent[0] == k - 1 else None

@@ -234,6 +234,10 @@ class RobotSampler:
                 "future",
             )
         assert state.position is not None
+        if newest is not None and stamp - newest.stamp_ns > self.max_age_ns:
+            # After a gap in the states a parabola through positions from before it is no
+            # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
+            self.velocity.reset()
         velocity = self.velocity.update(stamp, state.position)
         self._acceleration = self.velocity.acceleration
         if state.velocity is not None:
@@ -249,12 +253,12 @@ class RobotSampler:
         """Start sampling at this tick: its sample is ``k = floor(now / T)``; returns it.
 
         The ticks' phase within the period is fixed here, so a timer late by less than ``T``
-        keeps consecutive indices; the samples after a re-start all come after the ones
-        before it.
+        keeps consecutive indices; the samples after a re-start come after the ones before it,
+        with at least one index left out.
         """
         k = now_ns // self.period_ns
-        if self._last_k is not None and k <= self._last_k:
-            k = self._last_k + 1
+        if self._last_k is not None:
+            k = max(k, self._last_k + 2)  # a gap: the law takes no step across a restart
         self._phase_ns = now_ns - k * self.period_ns
         self._last_k = k - 1
         return k
