@@ -23,7 +23,8 @@ Controllers slower than the driver (``state_rate`` = 500 Hz, T = 10 ms) answer e
 ``sim_cycles_per_command`` cycles; the cycles in between step without waiting. Before the first
 command the arm stands on its brakes and time moves one cycle every :data:`SIM_RESEND_S` (or
 ``sim_wait_s`` if shorter) of wall time: controllers that start later find a state, and
-controllers on ``use_sim_time`` reach their first tick.
+controllers on ``use_sim_time`` reach their first tick. Each state is published before the
+``/clock`` that reaches its time, so a controller ticking then has it in hand.
 """
 
 from __future__ import annotations
@@ -320,9 +321,6 @@ class RobotSimNode(Node):
 
     def _publish(self, reading: Reading) -> None:
         stamp_ns = round(reading.stamp * wire.NS_PER_S)
-        if self.clock_pub is not None:
-            self._clock_msg.clock = wire.ns_to_stamp(stamp_ns, self._clock_msg.clock)
-            self.clock_pub.publish(self._clock_msg)
         msg = wire.arrays_to_joint_state(
             stamp_ns,
             reading.names,
@@ -332,6 +330,11 @@ class RobotSimNode(Node):
             msg=self._msg,
         )
         self.state_pub.publish(msg)
+        # /clock after the state it stamps: a controller whose timer fires when the clock
+        # reaches t then has the state at t in hand (one period "ahead" of its clock until then).
+        if self.clock_pub is not None:
+            self._clock_msg.clock = wire.ns_to_stamp(stamp_ns, self._clock_msg.clock)
+            self.clock_pub.publish(self._clock_msg)
         self._published_wall = time.monotonic()
 
     def _sync_diagnostics(self) -> None:
