@@ -209,3 +209,11 @@ def test_plant_brake_holds_the_position_and_counts_the_sample():
     assert plant.k == 2
     assert_array_equal(plant.q, q)
     assert_array_equal(plant.qd, np.zeros(N))
+
+
+def test_the_watchdog_comes_from_its_parameter_in_ns():
+    from apc_plant_sim.intake import WATCHDOG_PARAMS
+
+    values = {p.name: p.default for p in WATCHDOG_PARAMS}
+    got = TorqueIntake.from_params(T, False, values)
+    assert got.watchdog_ns == 50_000_000 and not got.lockstep

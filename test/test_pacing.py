@@ -30,3 +30,11 @@ def test_a_sample_times_out_from_its_first_send_not_its_resends():
     assert pacer.sample_timed_out(3.01)
     pacer.sent(3.01)  # the next sample
     assert pacer.waited(3.5) == 3.5 - 3.01 and not pacer.sample_timed_out(3.5)
+
+
+def test_the_pacer_reads_its_parameters():
+    from apc_plant_sim.pacing import PACING_PARAMS
+
+    values = {p.name: p.default for p in PACING_PARAMS}
+    pacer = StatePacer.from_params(values, now=5.0)
+    assert (pacer.resend_s, pacer.timeout_s, pacer.created) == (0.5, 10.0, 5.0)

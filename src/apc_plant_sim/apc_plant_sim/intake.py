@@ -17,11 +17,26 @@ The node maps each outcome to counters, log lines and what it publishes.
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from apc_core import wire
+from apc_core.params import Param
+
+#: The plant node's parameter of the real-time watchdog.
+WATCHDOG_PARAMS: tuple[Param, ...] = (
+    Param(
+        "watchdog_s",
+        0.05,
+        "realtime: a torque whose sample is older than this (s, counted in the plant's own "
+        "periods) is missing: no feedback -> nominal only; no nominal -> brake",
+        0.0,
+        60.0,
+    ),
+)
 
 
 class Source(enum.Enum):
@@ -102,6 +117,11 @@ class TorqueIntake:
         # by stamp; each becomes the latest when its sample comes.
         self.ahead: dict[int, np.ndarray] = {}
         self._newest: dict[Source, int] = {}  # newest stamp taken per source
+
+    @classmethod
+    def from_params(cls, period_ns: int, lockstep: bool, values: Mapping[str, Any]) -> TorqueIntake:
+        """With the watchdog of the node's :data:`WATCHDOG_PARAMS` values."""
+        return cls(period_ns, lockstep, wire.seconds_to_ns(values["watchdog_s"]))
 
     def take(self, source: Source, stamp_ns: int, effort: np.ndarray, k: int) -> Filed:
         """File a torque stamped ``stamp_ns`` while the plant is at sample ``k``.

@@ -54,8 +54,8 @@ from apc_core.nodeutil import (
     run_node,
 )
 from apc_core.params import ConfigError, Param, declare
-from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
-from apc_plant_sim.pacing import StatePacer
+from apc_plant_sim.intake import WATCHDOG_PARAMS, Action, Filed, Source, TorqueIntake
+from apc_plant_sim.pacing import PACING_PARAMS, StatePacer
 from apc_plant_sim.plant import PlantError
 from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
 
@@ -76,25 +76,8 @@ PARAMS: tuple[Param, ...] = (
         0,
         1000,
     ),
-    Param(
-        "resend_s", 0.5, "lockstep: re-send joint_states(k) after this wall time (s)", 0.01, 60.0
-    ),
-    Param(
-        "lockstep_timeout_s",
-        10.0,
-        "lockstep: end the run with an error if the peers are not there at start, or sample k "
-        "gets no torques, for this long (s)",
-        0.1,
-        3600.0,
-    ),
-    Param(
-        "watchdog_s",
-        0.05,
-        "realtime: a torque whose sample is older than this (s, counted in the plant's own "
-        "periods) is missing: no feedback -> nominal only; no nominal -> brake",
-        0.0,
-        60.0,
-    ),
+    *PACING_PARAMS,
+    *WATCHDOG_PARAMS,
     Param("publish_clock", True, "publish /clock = kT (sim time for use_sim_time nodes)"),
 )
 
@@ -135,12 +118,9 @@ class PlantNode(Node):
         self.diagnostics.set("mode", self.mode)
         self.done = False
         self.exit_code = 0
-        watchdog_ns = wire.seconds_to_ns(values["watchdog_s"])
-        self.intake = TorqueIntake(self.period_ns, self.mode == "lockstep", watchdog_ns)
+        self.intake = TorqueIntake.from_params(self.period_ns, self.mode == "lockstep", values)
         self._applied: np.ndarray | None = None
-        self.pacer = StatePacer(
-            values["resend_s"], values["lockstep_timeout_s"], now=time.monotonic()
-        )
+        self.pacer = StatePacer.from_params(values, now=time.monotonic())
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
@@ -195,7 +175,7 @@ class PlantNode(Node):
                 self.joint_names,
                 position=self.plant.q,
                 velocity=self.plant.qd,
-                effort=self._applied if self._applied is not None else None,
+                effort=self._applied,
                 msg=self._js_msg,
             )
         except wire.WireError as exc:  # a state beyond the wire's bound: the simulation blew up

@@ -9,6 +9,26 @@ controllers answer it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
+from apc_core.params import Param
+
+#: The plant node's parameters of these rules.
+PACING_PARAMS: tuple[Param, ...] = (
+    Param(
+        "resend_s", 0.5, "lockstep: re-send joint_states(k) after this wall time (s)", 0.01, 60.0
+    ),
+    Param(
+        "lockstep_timeout_s",
+        10.0,
+        "lockstep: end the run with an error if the peers are not there at start, or sample k "
+        "gets no torques, for this long (s)",
+        0.1,
+        3600.0,
+    ),
+)
+
 
 class StatePacer:
     """Times of the joint states sent, and what is due (see module docstring).
@@ -28,6 +48,11 @@ class StatePacer:
         #: When the current sample's state was first sent (latency counts from here).
         self.first_sent = 0.0
         self.last_sent = 0.0
+
+    @classmethod
+    def from_params(cls, values: Mapping[str, Any], now: float) -> StatePacer:
+        """From the node's :data:`PACING_PARAMS` values."""
+        return cls(values["resend_s"], values["lockstep_timeout_s"], now)
 
     def sent(self, now: float, resend: bool = False) -> None:
         """A joint state went out at ``now``; ``resend``: the current sample's, again."""
