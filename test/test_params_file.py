@@ -136,3 +136,36 @@ def test_a_plant_given_only_the_urdf_starts_mid_range_with_the_payload_on_the_la
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+@pytest.mark.parametrize("arm", ["puma560_3dof.urdf", "panda"])
+def test_the_robot_mode_file_starts_the_controllers_of_a_ros2_control_robot(arm, tmp_path):
+    from apc_feedback.robot_node import RobotNode
+
+    urdf, lock = _arm(arm)
+    out = tmp_path / "robot.yaml"
+    argv = ["--urdf", urdf, "--out", str(out), "--robot-mode"]
+    assert main(argv + (["--lock-joints", *lock] if lock else [])) == 0
+    values = yaml.safe_load(out.read_text())
+    assert set(values) == {"/**", "feedforward_node", "robot_node"}
+    assert "inertia_error" not in values["/**"]["ros__parameters"]  # none added to a real arm
+    robot, _ = load(urdf, lock_joints=lock)
+    assert values["robot_node"]["ros__parameters"]["command_joints"] == list(robot.joint_names)
+
+    context = rclpy.Context()
+    rclpy.init(
+        args=["--ros-args", "--params-file", str(out)],
+        context=context,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    nodes = []
+    try:
+        nodes.append(FeedforwardNode(context=context))
+        assert nodes[0].mode == "robot"
+        nodes.append(RobotNode(context=context))  # autostart: configured and activated here
+        assert nodes[1].configure_error == "" and nodes[1].loop is not None
+        assert nodes[1].get_parameter("preset").value == "recommended"
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)

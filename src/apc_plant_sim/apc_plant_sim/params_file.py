@@ -2,12 +2,16 @@
 
     apc_params --urdf my_arm.urdf --out my_arm.yaml [--lock-joints finger_1 finger_2]
     arm --ros-args --params-file my_arm.yaml
+    apc_params --urdf my_arm.urdf --out my_robot.yaml --robot-mode     # a ros2_control robot
+    arm --controllers --ros-args --params-file my_robot.yaml
 
 The file has one section per node (``/**`` for what all share). Active lines are what this
 URDF needs: where it is, the joints to lock, and the per-joint defaults derived from it
 (:mod:`apc_core.defaults`: start at the middle of each joint's range, a first move inside it,
 the paper's +-10 % inertia error pattern for the simulated controllers' model, the payload on
-the last link). Every other parameter of each node follows as a comment with its default and
+the last link; with ``--robot-mode``, the feedforward in robot mode and ``robot_node``
+started at once with ``command_joints`` in the URDF's order, and no simulated model error).
+Every other parameter of each node follows as a comment with its default and
 meaning, so the file shows all there is to set and the nodes keep their own defaults until a
 line is uncommented. The file starts the nodes as written (``test/test_params_file.py``).
 """
@@ -27,6 +31,7 @@ from apc_core.nodeutil import ROBOT_PARAMS, resolve_config_path
 from apc_core.params import Param
 from apc_core.robot import RobotModelError
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
+from apc_feedback.robot_node import PARAMS as ROBOT_NODE_PARAMS
 from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS
 from apc_plant_sim.node import PARAMS as PLANT_PARAMS
 
@@ -39,6 +44,8 @@ WRITTEN = {
     "inertia_error": "inertia_error",
     "payload_frame": "plant_node payload.frame",
 }
+#: Of those, what only a simulation uses (not written with --robot-mode).
+SIMULATION_ONLY = frozenset(WRITTEN)
 
 
 def _value(value: Any) -> str:
@@ -66,46 +73,71 @@ def _section(
 
 
 def render(
-    urdf: str, defaults: ArmDefaults, lock_joints: Sequence[str] = (), source: str = ""
+    urdf: str,
+    defaults: ArmDefaults,
+    lock_joints: Sequence[str] = (),
+    source: str = "",
+    robot_mode: bool = False,
 ) -> str:
-    """The parameter file's text for the arm of ``urdf`` with its derived ``defaults``."""
-    shared: dict[str, tuple[Any, str]] = {
-        "robot_description_path": (urdf, "the arm"),
-        "inertia_error": (
+    """The parameter file's text for the arm of ``urdf`` with its derived ``defaults``: apc's
+    simulated arm (plant, feedforward, feedback), or with ``robot_mode`` the controllers of a
+    ros2_control robot (feedforward in robot mode, robot_node)."""
+    shared: dict[str, tuple[Any, str]] = {"robot_description_path": (urdf, "the arm")}
+    if not robot_mode:  # a real arm's model error is whatever it is: none is added
+        shared["inertia_error"] = (
             list(defaults.inertia_error),
             f"{DERIVATION['inertia_error']}; simulation only, [] on a real arm",
-        ),
-    }
+        )
     if lock_joints:
         shared["lock_joints"] = (list(lock_joints), "frozen at 0 so the rest is a serial chain")
-    feedforward = {
-        "move.goal_deg": (
-            list(defaults.q_goal_deg),
-            f"{DERIVATION['q_goal_deg']}; [] = hold until a goal arrives",
-        )
-    }
-    plant = {
-        "q_initial_deg": (list(defaults.q_start_deg), DERIVATION["q_start_deg"]),
-        "payload.frame": (defaults.payload_frame, DERIVATION["payload_frame"]),
-    }
     shared_rows = [p for p in (*ROBOT_PARAMS, *FEEDBACK_PARAMS) if p.name in SHARED]
     joints = ", ".join(defaults.joint_names)
     header = [
         f"# apc parameters for {source or urdf}, written by apc_params; edit freely.",
         f"# Joints, in the order of every per-joint list: {joints}.",
         "# Active lines come from the URDF; commented ones are each node's default.",
-        "#   arm --ros-args --params-file <this file>          # the three nodes, one process",
-        "#   ros2 run apc_feedback feedback_node --ros-args --params-file <this file>",
     ]
-    body = [
-        *_section("/**", _unique(shared_rows), shared, ()),
-        "",
-        *_section("feedforward_node", FEEDFORWARD_PARAMS, feedforward, SHARED),
-        "",
-        *_section("feedback_node", FEEDBACK_PARAMS, {}, SHARED),
-        "",
-        *_section("plant_node", PLANT_PARAMS, plant, SHARED),
-    ]
+    body = [*_section("/**", _unique(shared_rows), shared, ()), ""]
+    if robot_mode:
+        header += [
+            "#   arm --controllers --ros-args --params-file <this file>   # one process",
+            "#   ros2 run apc_feedback robot_node --ros-args --params-file <this file>",
+        ]
+        feedforward = {"mode": ("robot", "samples from robot_node's reading of the driver")}
+        robot = {
+            "autostart": (True, "configure and activate at start (else: ros2 lifecycle set)"),
+            "command_joints": (
+                list(defaults.joint_names),
+                "the URDF's moving joints in order: make it your effort controller's 'joints'",
+            ),
+        }
+        body += [
+            *_section("feedforward_node", FEEDFORWARD_PARAMS, feedforward, SHARED),
+            "",
+            *_section("robot_node", ROBOT_NODE_PARAMS, robot, SHARED),
+        ]
+    else:
+        header += [
+            "#   arm --ros-args --params-file <this file>          # the three nodes, one process",
+            "#   ros2 run apc_feedback feedback_node --ros-args --params-file <this file>",
+        ]
+        feedforward = {
+            "move.goal_deg": (
+                list(defaults.q_goal_deg),
+                f"{DERIVATION['q_goal_deg']}; [] = hold until a goal arrives",
+            )
+        }
+        plant = {
+            "q_initial_deg": (list(defaults.q_start_deg), DERIVATION["q_start_deg"]),
+            "payload.frame": (defaults.payload_frame, DERIVATION["payload_frame"]),
+        }
+        body += [
+            *_section("feedforward_node", FEEDFORWARD_PARAMS, feedforward, SHARED),
+            "",
+            *_section("feedback_node", FEEDBACK_PARAMS, {}, SHARED),
+            "",
+            *_section("plant_node", PLANT_PARAMS, plant, SHARED),
+        ]
     return "\n".join(header + body) + "\n"
 
 
@@ -133,6 +165,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--lock-joints", nargs="+", default=[], help="joints to freeze (e.g. a gripper's)"
     )
+    parser.add_argument(
+        "--robot-mode",
+        action="store_true",
+        help="for a ros2_control robot: feedforward in robot mode and robot_node, no plant",
+    )
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     return parser
 
@@ -144,7 +181,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RobotModelError as exc:
         print(f"apc_params: --urdf {args.urdf}: {exc}", file=sys.stderr)
         return 2
-    text = render(urdf_parameter(args.urdf), defaults, args.lock_joints, source=args.urdf)
+    text = render(
+        urdf_parameter(args.urdf),
+        defaults,
+        args.lock_joints,
+        source=args.urdf,
+        robot_mode=args.robot_mode,
+    )
     if not args.out:
         sys.stdout.write(text)
         return 0
@@ -154,7 +197,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     out.write_text(text)
     for field, parameter in WRITTEN.items():
-        print(f"apc_params: {defaults.describe(field, parameter)}", file=sys.stderr)
+        if not (args.robot_mode and field in SIMULATION_ONLY):
+            print(f"apc_params: {defaults.describe(field, parameter)}", file=sys.stderr)
     print(f"apc_params: wrote {out}", file=sys.stderr)
     return 0
 
