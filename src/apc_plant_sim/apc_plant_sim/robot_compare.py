@@ -348,16 +348,24 @@ def _since(t0: float) -> float:
     return time.monotonic() - t0
 
 
+def load(path: str | Path) -> Any:
+    """A robot-mode recording from the start of the move to the end of the hold after it (the
+    arm runs on while the recorder drains)."""
+    from apc_plant_sim.recording import load_robot_run
+
+    run = load_robot_run(path)
+    end = run.move_end_index + round(HOLD_AFTER_S / float(run.run["scenario"]["period"])) + 1
+    rows = ("t", "q", "qd", "applied", "q_d", "qd_d", "qdd_d", "u_n", "du", "trace_p")
+    return replace(run, residual_norm=run.residual_norm[:end],
+                   **{name: getattr(run, name)[:end] for name in rows})  # fmt: skip
+
+
 def measure(path: str | Path) -> dict[str, Any]:
     """Per-joint metrics of a robot-mode recording (:mod:`apc_plant_sim.metrics`)."""
     from apc_plant_sim.analyze import robot_of
     from apc_plant_sim.metrics import compute_metrics
-    from apc_plant_sim.recording import load_robot_run
 
-    run = load_robot_run(path)
-    # The recording runs on while the recorder drains: up to the planned hold after the move.
-    end = run.move_end_index + round(HOLD_AFTER_S / float(run.run["scenario"]["period"])) + 1
-    run = replace(run, t=run.t[:end], q=run.q[:end], q_d=run.q_d[:end], applied=run.applied[:end])
+    run = load(path)
     metrics = compute_metrics(
         run.joint_names, run.q, run.q_d, run.applied, run.move_end_index, robot=robot_of(run)
     )
@@ -448,8 +456,9 @@ def beats_baselines(
             for key in ("max_error_deg", "final_error_deg"):
                 pairs = zip(mine[key], other[key], strict=True)
                 worse = [mine["joints"][j] for j, (a, b) in enumerate(pairs) if not a < b]
+                where = "every joint" if len(worse) == len(mine["joints"]) else ", ".join(worse)
                 if worse:
-                    losses.append(f"{key.split('_')[0]} vs {base} on {', '.join(worse)}")
+                    losses.append(f"{key.split('_')[0]} vs {base} on {where}")
         out[f"{c.arm} {c.effects} {c.case} {c.timing}"] = {"beats": not losses, "where_not": losses}
     return out
 
@@ -476,7 +485,6 @@ def figures(cases: Sequence[RobotCase], results: Mapping[str, dict], out: Path) 
     """Per arm, like the paper's Figs 6-8: case (c) error per joint for each law, ideal and with
     every effect on; and the pickup with every effect on."""
     from apc_plant_sim import plots
-    from apc_plant_sim.recording import load_robot_run
 
     made: list[Path] = []
     titles = {"puma3": "3-joint PUMA 560", "panda": "Franka Panda"}
@@ -487,7 +495,7 @@ def figures(cases: Sequence[RobotCase], results: Mapping[str, dict], out: Path) 
                           == (arm, effects, case_name, "sim") and _metrics(results, c)]  # fmt: skip
                 if not chosen or (case_name == "pickup" and effects == "ideal"):
                     continue
-                runs = {c.law: load_robot_run(results[c.name]["path"]) for c in chosen}
+                runs = {c.law: load(results[c.name]["path"]) for c in chosen}
                 what = "ideal arm" if effects == "ideal" else "every physical-arm effect on"
                 target = out / f"robot_{arm}_{case_name}_{effects}.png"
                 title = f"{titles[arm]} through the robot interface ({what})"
