@@ -44,7 +44,7 @@ class Peer:
             JointState,
             "/joint_states",
             lambda m: self.states.append((time.monotonic(), m)),
-            qos_profile_system_default,
+            wire.CONTROL_QOS,  # depth 10: a 500 Hz driver's burst of cycles is all kept
         )
         node.create_subscription(
             ClockMsg,
@@ -191,6 +191,25 @@ def test_sim_time_robot_steps_only_when_the_controller_answers(graph, tmp_path, 
         assert stamps == [stamps[0] + k * 10_000_000 for k in range(len(stamps))]
         assert stamps[0] % 10_000_000 == 0 and len(stamps) >= 21
         assert peer.clock and max(peer.clock) == stamps[-1]
+
+
+def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph, tmp_path):
+    """500 Hz driver, controllers at 100 Hz: each command moves time by five 2 ms cycles."""
+    peer = Peer(graph)
+    with robot_sim(
+        tmp_path, "sim_time:=true", "state_rate:=500.0", "sim_cycles_per_command:=5"
+    ) as proc:
+        graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
+        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
+        graph.spin_until(lambda: peer.clock, 10, "/clock")
+        for _ in range(10):
+            before = max(peer.clock)
+            peer.command([0.0, 10.0, 0.0])
+            graph.spin_until(lambda b=before: max(peer.clock) > b, 10, "time moving")
+            graph.spin_for(0.05)
+            assert max(peer.clock) - before == 10_000_000  # five cycles of 2 ms, then a wait
+        stamps = [wire.stamp_to_ns(m.header.stamp) for _, m in peer.states]
+        assert stamps == [stamps[0] + k * 2_000_000 for k in range(len(stamps))]
 
 
 def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):

@@ -379,12 +379,12 @@ class RobotSimNode(Node):
         self._cycle(now)
 
     # -- sim time -------------------------------------------------------------------------------
-    def _sim_braked_cycle(self) -> None:
-        """Before the first command: one cycle on the brakes, time moving on.
+    def _sim_cycle(self) -> None:
+        """One cycle: the drive's torque over one period, then the state at the new time.
 
-        Controllers on ``use_sim_time`` take their first sample when their clock reaches their
-        first tick, so time must pass before they can answer at all; the arm stands still on
-        its brakes meanwhile, as it would on hardware.
+        Before the first command the arm stands on its brakes while time moves on: controllers
+        on ``use_sim_time`` take their first sample when their clock reaches their first tick,
+        so time must pass before they can answer at all.
         """
         self._cycle(self._t)
         self._k += 1
@@ -393,19 +393,15 @@ class RobotSimNode(Node):
 
     def _sim_step(self) -> None:
         """Integrate one period, then on to the next cycle that waits for a command."""
-        while True:
-            self._cycle(self._t)
-            self._k += 1
-            self._t = self._k * self._period_ns / wire.NS_PER_S
-            self._publish(self.driver.measure(self._t))
-            if self._k % self._cycles_per_command == 0:
-                return
+        self._sim_cycle()
+        while self._k % self._cycles_per_command:
+            self._sim_cycle()
 
     def _sim_watch(self) -> None:
         waited = time.monotonic() - self._published_wall
         if not self.driver.has_command:
             if waited >= min(SIM_RESEND_S, self._sim_wait_s):
-                self._sim_braked_cycle()
+                self._sim_cycle()
         elif waited >= self._sim_wait_s:
             self.diagnostics.count("unanswered_cycles")
             self._sim_step()
