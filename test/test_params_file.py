@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from rclpy.signals import SignalHandlerOptions
 from apc_core.defaults import load
 from apc_core.robot import Payload, with_payload
 from apc_feedback.node import FeedbackNode
+from apc_feedback.robot_node import RobotNode
 from apc_feedforward.node import FeedforwardNode
 from apc_plant_sim.node import PlantNode
 from apc_plant_sim.params_file import main
@@ -29,6 +32,26 @@ def _arm(name: str) -> tuple[str, list[str]]:
     if name == "panda":
         return str(example_robot_urdf("panda_description/urdf/panda.urdf")), PANDA_FINGERS
     return str(CONFIG_DIR / name), []
+
+
+@contextmanager
+def _started(params_file: Path, *makers):
+    """The nodes ``makers`` build, started from ``params_file`` in a context of their own."""
+    context = rclpy.Context()
+    rclpy.init(
+        args=["--ros-args", "--params-file", str(params_file)],
+        context=context,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    nodes = []
+    try:
+        for make in makers:
+            nodes.append(make(context=context))
+        yield nodes
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 @pytest.mark.parametrize("arm", ["puma560_3dof.urdf", "puma560.urdf", "panda"])
@@ -56,16 +79,7 @@ def test_the_written_file_loads_back_and_starts_the_nodes(arm, tmp_path, capsys)
     goal = values["feedforward_node"]["ros__parameters"]["move.goal_deg"]
     assert goal == list(derived.q_goal_deg)
 
-    context = rclpy.Context()
-    rclpy.init(
-        args=["--ros-args", "--params-file", str(out)],
-        context=context,
-        signal_handler_options=SignalHandlerOptions.NO,
-    )
-    nodes = []
-    try:
-        for make in (FeedforwardNode, FeedbackNode, PlantNode):
-            nodes.append(make(context=context))
+    with _started(out, FeedforwardNode, FeedbackNode, PlantNode) as nodes:
         feedforward, feedback, plant_node = nodes
         for node in nodes:
             assert node.joint_names == robot.joint_names
@@ -74,10 +88,6 @@ def test_the_written_file_loads_back_and_starts_the_nodes(arm, tmp_path, capsys)
         assert list(feedforward.get_parameter("move.goal_deg").value) == goal
         error = list(feedback.get_parameter("inertia_error").value)
         assert error == list(derived.inertia_error)
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def test_an_existing_file_is_kept_unless_forced(tmp_path, capsys):
@@ -140,8 +150,6 @@ def test_a_plant_given_only_the_urdf_starts_mid_range_with_the_payload_on_the_la
 
 @pytest.mark.parametrize("arm", ["puma560_3dof.urdf", "panda"])
 def test_the_robot_mode_file_starts_the_controllers_of_a_ros2_control_robot(arm, tmp_path):
-    from apc_feedback.robot_node import RobotNode
-
     urdf, lock = _arm(arm)
     out = tmp_path / "robot.yaml"
     argv = ["--urdf", urdf, "--out", str(out), "--robot-mode"]
@@ -152,20 +160,8 @@ def test_the_robot_mode_file_starts_the_controllers_of_a_ros2_control_robot(arm,
     robot, _ = load(urdf, lock_joints=lock)
     assert values["robot_node"]["ros__parameters"]["command_joints"] == list(robot.joint_names)
 
-    context = rclpy.Context()
-    rclpy.init(
-        args=["--ros-args", "--params-file", str(out)],
-        context=context,
-        signal_handler_options=SignalHandlerOptions.NO,
-    )
-    nodes = []
-    try:
-        nodes.append(FeedforwardNode(context=context))
-        assert nodes[0].mode == "robot"
-        nodes.append(RobotNode(context=context))  # autostart: configured and activated here
-        assert nodes[1].configure_error == "" and nodes[1].loop is not None
-        assert nodes[1].get_parameter("preset").value == "recommended"
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    with _started(out, FeedforwardNode, RobotNode) as (feedforward, robot_node):
+        assert feedforward.mode == "robot"
+        # autostart: configured and activated at construction
+        assert robot_node.configure_error == "" and robot_node.loop is not None
+        assert robot_node.get_parameter("preset").value == "recommended"
