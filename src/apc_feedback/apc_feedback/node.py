@@ -8,7 +8,9 @@ what a sample, a duplicate, a resend or a stale message is) and publishes ``du(k
 identifier never sees a sample twice.
 
 The law is the ``controller`` parameter, its settings a parameter family (``adaptive.``,
-``gains.``) made from its settings dataclass (:mod:`apc_feedback.laws`). Those "settable at run
+``gains.``) made from its settings dataclass (:mod:`apc_feedback.laws`); the ``preset``
+parameter (:mod:`apc_feedback.presets`: ``recommended`` unless told, ``paper`` as printed) gives
+the ``adaptive.*`` parameters their defaults, which a value given overrides. Those "settable at run
 time" can be changed with ``ros2 param set``: checked when set (refused with a reason naming
 the parameter), applied from the next sample on. Every other parameter is read-only.
 """
