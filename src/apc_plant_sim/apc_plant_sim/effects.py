@@ -242,6 +242,41 @@ def single_effect(name: str, full: ArmEffects) -> ArmEffects:
     return replace(ArmEffects(seed=full.seed), **kept)
 
 
+class DriveSensing:
+    """What a drive reports of the arm: quantised positions and its velocity, once a period.
+
+    The sensing fields of :class:`ArmEffects` (``counts_per_rev``, ``velocity``,
+    ``velocity_noise_rad_s``, ``seed``); shared by :class:`PhysicalArm` and the simulated
+    ros2_control robot's driver.
+    """
+
+    def __init__(self, effects: ArmEffects, n: int, period: float, q0: np.ndarray) -> None:
+        counts = effects.per_joint("counts_per_rev", n)
+        self._resolution = np.where(counts > 0.0, 2.0 * np.pi / np.where(counts > 0, counts, 1), 0)
+        self._rng = np.random.default_rng(effects.seed)
+        self._velocity = effects.velocity
+        self._noise = effects.velocity_noise_rad_s
+        self._period = period
+        self._q_previous = self.quantise(q0)
+
+    def quantise(self, q: np.ndarray) -> np.ndarray:
+        """Positions as the encoder counts them (unchanged where counts_per_rev is off)."""
+        r = self._resolution
+        return np.where(r > 0.0, np.round(q / np.where(r > 0, r, 1.0)) * r, q)
+
+    def read(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(measured position, reported velocity) of the true ``(q, q')``; call once a period."""
+        q_measured = self.quantise(q)
+        if self._velocity == "difference":
+            qd_measured = (q_measured - self._q_previous) / self._period
+        elif self._velocity == "noisy":
+            qd_measured = qd + self._rng.normal(0.0, self._noise, len(qd))
+        else:
+            qd_measured = np.array(qd, dtype=float)
+        self._q_previous = q_measured
+        return q_measured, qd_measured
+
+
 class _FrictionPlant(Plant):
     """apc's plant with armature and joint friction in its forward dynamics."""
 
@@ -297,11 +332,8 @@ class PhysicalArm:
         self.effects = effects
         self._plant = _FrictionPlant(robot, config, effects, q0, qd0)
         n = self._plant.n_joints
-        counts = effects.per_joint("counts_per_rev", n)
-        self._resolution = np.where(counts > 0.0, 2.0 * np.pi / np.where(counts > 0, counts, 1), 0)
-        self._rng = np.random.default_rng(effects.seed)
+        self._sensing = DriveSensing(effects, n, config.period, self._plant.q)
         self._pending: list[np.ndarray] = []
-        self._q_meas_prev = self._quantise(self._plant.q)
         self._measure()
 
     # The attributes run_closed_loop reads.
@@ -335,22 +367,8 @@ class PhysicalArm:
     def limit(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self._plant.limit(tau)
 
-    def _quantise(self, q: np.ndarray) -> np.ndarray:
-        r = self._resolution
-        return np.where(r > 0.0, np.round(q / np.where(r > 0, r, 1.0)) * r, q)
-
     def _measure(self) -> None:
-        q_meas = self._quantise(self._plant.q)
-        source = self.effects.velocity
-        if source == "difference":
-            qd_meas = (q_meas - self._q_meas_prev) / self.config.period
-        elif source == "noisy":
-            noise = self._rng.normal(0.0, self.effects.velocity_noise_rad_s, self.n_joints)
-            qd_meas = self._plant.qd + noise
-        else:
-            qd_meas = self._plant.qd.copy()
-        self._q_meas_prev = q_meas
-        self.q, self.qd = q_meas, qd_meas
+        self.q, self.qd = self._sensing.read(self._plant.q, self._plant.qd)
 
     def step(self, tau: np.ndarray) -> PlantStep:
         """Take command ``tau``; apply the one ``command_delay`` periods old (at the start, the

@@ -36,7 +36,7 @@ from typing import Protocol
 
 import numpy as np
 
-from apc_plant_sim.effects import ArmEffects
+from apc_plant_sim.effects import ArmEffects, DriveSensing
 
 
 class DriverError(ValueError):
@@ -198,18 +198,13 @@ class RobotDriver:
         self._timed_out = False
         self._applied = np.zeros(n)  # torque over the period that ended at the last advance
         self.braked = True
-        sensing = config.sensing
         try:
-            counts = sensing.per_joint("counts_per_rev", n)
+            self._sensing = DriveSensing(config.sensing, n, config.period, engine.q)
         except ValueError as exc:
             raise DriverError(f"encoder_counts_per_rev: {exc}") from None
-        safe = np.where(counts > 0.0, counts, 1.0)
-        self._resolution = np.where(counts > 0.0, 2.0 * np.pi / safe, 0.0)
-        self._rng = np.random.default_rng(sensing.seed)
         # Torques decided at the last command_delay cycles, oldest first (filled at the first).
         self._delay_line: deque[np.ndarray] = deque()
-        self._q_measured = self._quantise(engine.q)
-        self._qd_measured = self._drive_velocity(self._q_measured, self._q_measured)
+        self._q_measured, self._qd_measured = self._sensing.read(engine.q, engine.qd)
 
     # -- command subscription -------------------------------------------------------------------
     def offer(self, data: Sequence[float], now: float) -> str | None:
@@ -255,25 +250,9 @@ class RobotDriver:
         """The joint state at ``now`` as the robot publishes it (what its drives measured)."""
         return self._reading(now, self._q_measured, self._qd_measured)
 
-    def _quantise(self, q: np.ndarray) -> np.ndarray:
-        r = self._resolution
-        return np.where(r > 0.0, np.round(q / np.where(r > 0.0, r, 1.0)) * r, q)
-
-    def _drive_velocity(self, q_measured: np.ndarray, q_previous: np.ndarray) -> np.ndarray:
-        source = self.config.sensing.velocity
-        if source == "difference":
-            return (q_measured - q_previous) / self.config.period
-        qd = np.array(self.engine.qd, dtype=float)
-        if source == "noisy":
-            noise = self.config.sensing.velocity_noise_rad_s
-            qd = qd + self._rng.normal(0.0, noise, qd.shape)
-        return qd
-
     def _sense(self) -> None:
         """The drives read the arm once per cycle, after it has moved."""
-        q_measured = self._quantise(self.engine.q)
-        self._qd_measured = self._drive_velocity(q_measured, self._q_measured)
-        self._q_measured = q_measured
+        self._q_measured, self._qd_measured = self._sensing.read(self.engine.q, self.engine.qd)
 
     def _reading(self, now: float, q: np.ndarray, qd: np.ndarray) -> Reading:
         index = np.where(self._extra, 0, self._state_index)
