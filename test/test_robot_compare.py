@@ -13,6 +13,7 @@ from apc_core import bag, wire
 from apc_core.bag import BagWriter
 from apc_feedforward.trajectory import FourThreeFour, Waypoints
 from apc_plant_sim import robot_compare as rc
+from apc_plant_sim.effects import puma560_effects
 from apc_plant_sim.recording import load_robot_run
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -57,6 +58,17 @@ def test_parameters_are_declared_by_the_nodes_they_go_to():
         for node, names in declared.items():
             # rclpy drops an override of an undeclared parameter without a word.
             assert set(params[node]) <= names, (node, set(params[node]) - names)
+
+
+def test_one_effect_alone_is_the_presets_value_of_it():
+    friction = rc.effect_parameters("puma3", "friction")
+    preset = puma560_effects()
+    mean = 0.5 * (np.array(preset.coulomb_pos_nm) + np.array(preset.coulomb_neg_nm))
+    np.testing.assert_allclose(friction["frictionloss"], mean)
+    assert friction["armature"] == [0.0] * 3 and friction["command_delay_cycles"] == 0
+    delay = rc.effect_parameters("panda", "delay")
+    assert delay["command_delay_cycles"] == 1 and "encoder_counts_per_rev" not in delay
+    assert rc.effect_parameters("panda", "physical") == {"effects": "panda"}
 
 
 def _robot_recording(path, move_start_k: int, n: int = 40):

@@ -47,7 +47,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
 from apc_core.nodeutil import StopSignals, destroy_nodes, make_executor
+from apc_core.params import ConfigError
 from apc_core.robot import example_robot_urdf
+from apc_plant_sim.effects import panda_effects, puma560_effects, single_effect
 from apc_plant_sim.experiment import (
     Progress,
     law_parameters,
@@ -132,13 +134,19 @@ def arm_scenario(arm: str, case: str) -> Scenario:
 #: robot_sim's ``effects`` preset of each arm: every effect of a physical arm from its data
 #: (:func:`apc_plant_sim.effects.puma560_effects`, :func:`apc_plant_sim.effects.panda_effects`).
 PHYSICAL_PRESETS = {"puma3": "puma560", "panda": "panda"}
+#: The same data as :data:`PHYSICAL_PRESETS`, as :class:`ArmEffects` (one effect at a time).
+ARM_EFFECTS = {"puma3": puma560_effects, "panda": panda_effects}
 #: MuJoCo's own dynamics and integrator: an engine no one here wrote.
 ENGINE = "mujoco"
 
 
 @dataclass(frozen=True)
 class RobotCase:
-    """One run: arm, case, what the arm adds, feedback law, timing."""
+    """One run: arm, case, what the arm adds, feedback law, timing.
+
+    ``effects``: ``ideal``, ``physical`` (every effect of the arm's preset), or one effect of
+    the preset alone (a key of :data:`apc_plant_sim.effects.EFFECT_FIELDS`).
+    """
 
     arm: str
     case: str
@@ -175,6 +183,29 @@ def plan(
     return runs
 
 
+def effect_parameters(arm: str, effects: str) -> dict[str, Any]:
+    """robot_sim's physical-arm parameters: ``ideal``, the arm's preset (``physical``), or one
+    effect of the preset alone. MuJoCo's ``frictionloss`` is one level for both directions (the
+    mean of the two, as robot_sim makes it of a preset)."""
+    if effects in ("ideal", "physical"):
+        return {"effects": PHYSICAL_PRESETS[arm] if effects == "physical" else "ideal"}
+    one = single_effect(effects, ARM_EFFECTS[arm]())
+    n = len(ARM_EFFECTS[arm]().counts_per_rev)
+    coulomb = 0.5 * (one.per_joint("coulomb_pos_nm", n) + one.per_joint("coulomb_neg_nm", n))
+    values = {
+        "effects": "ideal",
+        "damping": one.per_joint("viscous_nm_s", n).tolist(),
+        "frictionloss": coulomb.tolist(),
+        "armature": one.per_joint("armature_kgm2", n).tolist(),
+        "encoder_counts_per_rev": list(one.counts_per_rev),
+        "velocity_source": one.velocity,
+        "velocity_noise": float(one.velocity_noise_rad_s),
+        "command_delay_cycles": int(one.command_delay),
+    }
+    # An empty list is the preset's value (here: none), and rclpy cannot type an empty array.
+    return {k: v for k, v in values.items() if v != []}
+
+
 def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
     """ROS parameters of each node, keyed by node name (a ROS parameter-file layout)."""
     sc = case.scenario
@@ -196,7 +227,7 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
     robot_sim = {
         **shared,
         "engine": ENGINE,
-        "effects": PHYSICAL_PRESETS[case.arm] if case.effects == "physical" else "ideal",
+        **effect_parameters(case.arm, case.effects),
         "state_rate": DRIVER_RATE_HZ,
         "q_initial_deg": [float(v) for v in sc.q_start_deg],
         "payload.mass_kg": float(sc.payload_kg),
@@ -338,7 +369,7 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
             return RobotOutcome(path, ok, "ok" if ok else f"faults {faults}", _since(t0))
         except (KeyboardInterrupt, ExternalShutdownException) as exc:
             return RobotOutcome(path, False, f"interrupted ({exc})".replace(" ()", ""), _since(t0))
-        except TimeoutError as exc:
+        except (TimeoutError, ConfigError) as exc:
             return RobotOutcome(path, False, str(exc), _since(t0))
         finally:
             destroy_nodes(nodes, context, executor)
