@@ -140,3 +140,22 @@ def test_the_derived_move_is_tracked_with_the_recommended_preset(arm):
     error_deg = np.rad2deg(np.abs(result.q - result.q_d))
     assert error_deg.max() < 1.0
     assert not np.any(result.saturated)
+
+
+def test_experiment_with_a_urdf_derives_what_is_not_given_and_prints_each(tmp_path, capsys):
+    from apc_plant_sim.experiment import build_parser, spec_from_args
+
+    urdf = str(CONFIG_DIR / "puma560.urdf")
+    _, d = load(urdf)
+    spec = spec_from_args(build_parser().parse_args(["--urdf", urdf]))
+    sc = spec.scenario
+    assert (sc.q_start_deg, sc.q_goal_deg) == (d.q_start_deg, d.q_goal_deg)
+    assert (sc.inertia_error, sc.payload_frame) == (d.inertia_error, d.payload_frame)
+    told = capsys.readouterr().err.splitlines()
+    assert told == [f"experiment: {d.describe(field)}" for field in DERIVATION]
+    # A scenario file naming the URDF keeps what it gives and derives the rest.
+    given = tmp_path / "move.yaml"
+    given.write_text(f"urdf: {urdf}\nq_goal_deg: [10, 80, -80, 30, 0, 0]\n")
+    sc = spec_from_args(build_parser().parse_args(["--scenario", str(given)])).scenario
+    assert sc.q_goal_deg == (10, 80, -80, 30, 0, 0) and sc.q_start_deg == d.q_start_deg
+    assert len(capsys.readouterr().err.splitlines()) == 3
