@@ -106,6 +106,7 @@ def test_a_robot_recording_is_read_from_the_start_of_the_move(tmp_path):
     assert run.joint_names == NAMES
     # Rows from the last sample before the set point moves, t = 0 there.
     assert run.t[0] == 0.0 and run.t[1] == pytest.approx(0.01)
+    assert run.run["move_start_s"] == pytest.approx(0.07)
     assert len(run.t) == 40 - 7
     np.testing.assert_allclose(run.q[0] - run.q_d[0], np.array([0.001, -0.002, 0.003]) * 7)
     # The torque is the driver's first state after the sample (k's command, in model order).

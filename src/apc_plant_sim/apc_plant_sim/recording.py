@@ -161,10 +161,11 @@ def load_robot_run(path: str | Path) -> RecordedRun:
     rows are the samples the controllers took (``feedback/sample``, stamped ``kT``: what the law
     measured, with the driver's quantisation and velocity), each with the set point of its
     stamp. The move starts at the last sample before the first set point that moves (a goal
-    starts after a hold). ``applied`` is the torque of the driver's first state after the
-    sample (the torque over the driver period that followed it). There is no feedback-torque
-    topic in robot mode (the commanding node adds ``u_n + du`` itself): ``du`` is NaN, and so is
-    the identification telemetry.
+    starts after a hold; its time on the recording's clock is ``run["move_start_s"]``).
+    ``applied`` is the torque of the driver's first state after the sample (the torque over the
+    driver period that followed it). There is no feedback-torque topic in robot mode (the
+    commanding node adds ``u_n + du`` itself): ``du`` is NaN, and so is the identification
+    telemetry.
     """
     path = Path(path)
     run = _custom_run(path)
@@ -225,5 +226,5 @@ def load_robot_run(path: str | Path) -> RecordedRun:
         trace_p=np.full(rows - start, np.nan),
         residual_norm=np.full(rows - start, np.nan),
         theta_t=None,
-        run=run,
+        run={**run, "move_start_s": stamps[start] / wire.NS_PER_S},
     )

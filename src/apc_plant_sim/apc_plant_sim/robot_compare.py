@@ -535,8 +535,10 @@ def figures(cases: Sequence[RobotCase], results: Mapping[str, dict], out: Path) 
                     made.append(plots.controller_comparison(
                         runs, target, f"{title}, 5 lb", paper_signs=signs))  # fmt: skip
                 else:
+                    first = next(iter(runs.values())).run
+                    pickup_s = first["scenario"]["payload_at_s"] - first["move_start_s"]
                     made.append(plots.pickup(
-                        runs, PICKUP_AFTER_S, target, f"{title}, 5 lb picked up",
+                        runs, pickup_s, target, f"{title}, 5 lb picked up",
                         paper_signs=signs))  # fmt: skip
     return made
 
