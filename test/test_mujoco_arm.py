@@ -14,7 +14,7 @@ from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_pay
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_plant_sim.effects import PANDA_FRICTION_PHI1_NM, ArmEffects, puma560_effects
-from apc_plant_sim.engines import effects_from_values, make_engine
+from apc_plant_sim.engines import EngineError, effects_from_values, make_engine
 from apc_plant_sim.mujoco_arm import (
     MIN_MASS_KG,
     JointEffects,
@@ -312,3 +312,28 @@ def test_panda_in_mujoco_with_its_identified_friction():
         loaded=True,
     )
     np.testing.assert_allclose(engine.model.dof_frictionloss, np.array(PANDA_FRICTION_PHI1_NM) / 2)
+
+
+@pytest.mark.parametrize("engine_name", ["mujoco", "pinocchio"])
+def test_an_unstable_period_raises_and_keeps_the_state(engine_name, tmp_path, monkeypatch):
+    """MuJoCo would reset the arm to its initial pose (and write MUJOCO_LOG.TXT into the
+    working directory); here the period is refused, the state before it kept."""
+    monkeypatch.chdir(tmp_path)
+    q0 = np.deg2rad([10.0, -30.0, 20.0])
+    engine = make_engine(
+        engine_name,
+        _puma3(),
+        Payload(),
+        ArmEffects(),
+        period=0.01,
+        max_step=0.005,
+        q0=q0,
+        loaded=True,
+    )
+    engine.advance(np.array([0.0, 50.0, 0.0]), 0.01)
+    q, qd = engine.q, engine.qd
+    with pytest.raises(EngineError):
+        engine.advance(np.array([1e300, -1e300, 1e300]), 0.01)
+    np.testing.assert_array_equal(engine.q, q)
+    np.testing.assert_array_equal(engine.qd, qd)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

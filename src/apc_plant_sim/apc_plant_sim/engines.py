@@ -26,9 +26,14 @@ import numpy as np
 from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, with_payload
 from apc_plant_sim.effects import ArmEffects, panda_effects, puma560_effects
-from apc_plant_sim.plant import Plant, PlantConfig
+from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 
 ENGINES = ("pinocchio", "mujoco")
+
+
+class EngineError(RuntimeError):
+    """The physics could not integrate a period (the state would have become non-finite or
+    unbounded); the engine keeps the state it had before."""
 
 
 class EngineSetup:
@@ -93,7 +98,10 @@ class PinocchioEngine(EngineSetup):
 
     def advance(self, tau: np.ndarray, duration: float) -> None:
         self.check_duration(duration)
-        self.plant.step(tau)
+        try:
+            self.plant.step(tau)
+        except PlantError as exc:  # the plant keeps its state
+            raise EngineError(str(exc)) from None
 
     def hold(self) -> None:
         self.plant.qd = np.zeros(len(self.joint_names))

@@ -34,6 +34,7 @@ MuJoCo arm and a Pinocchio arm can be compared with the same inertias.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,7 +46,21 @@ import pinocchio as pin
 
 from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, RobotModelError
-from apc_plant_sim.engines import EngineSetup
+from apc_plant_sim.engines import EngineError, EngineSetup
+
+# MuJoCo writes its warnings to MUJOCO_LOG.TXT in the working directory unless a handler takes
+# them: they go to Python's logging instead.
+mujoco.set_mju_user_warning(logging.getLogger("mujoco").warning)
+
+#: MuJoCo's warnings that an integration went unstable (the state left mjMAXVAL or is NaN).
+_UNSTABLE = tuple(
+    int(w)
+    for w in (
+        mujoco.mjtWarning.mjWARN_BADQACC,
+        mujoco.mjtWarning.mjWARN_BADQPOS,
+        mujoco.mjtWarning.mjWARN_BADQVEL,
+    )
+)
 
 #: MuJoCo integrators by the name the ``mujoco.integrator`` parameter takes.
 INTEGRATORS = {
@@ -304,6 +319,7 @@ class MujocoEngine(EngineSetup):
             mj_model = compile_model(physical, effects)
             mj_model.opt.timestep = self.period / self.substeps
             mj_model.opt.integrator = INTEGRATORS[integrator]
+            mj_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
             models[key] = mj_model
         self._models = models
         self.model = models["loaded" if self.loaded else "bare"]
@@ -320,10 +336,27 @@ class MujocoEngine(EngineSetup):
         return self.data.qvel.copy()
 
     def advance(self, tau: np.ndarray, duration: float) -> None:
+        """Integrate one period under ``tau``.
+
+        Raises
+        ------
+        EngineError
+            MuJoCo found the state unstable; the state before the period is kept (MuJoCo's own
+            reset to the initial pose is off: an arm does not jump back to where it started).
+        """
         self.check_duration(duration)
-        self.data.qfrc_applied[:] = tau
+        data = self.data
+        before = (data.time, data.qpos.copy(), data.qvel.copy())
+        counts = [data.warning[w].number for w in _UNSTABLE]
+        data.qfrc_applied[:] = tau
         for _ in range(self.substeps):
-            mujoco.mj_step(self.model, self.data)
+            mujoco.mj_step(self.model, data)
+        if [data.warning[w].number for w in _UNSTABLE] != counts or not (
+            np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all()
+        ):
+            data.time, data.qpos[:], data.qvel[:] = before
+            mujoco.mj_forward(self.model, data)
+            raise EngineError(f"MuJoCo: the simulation became unstable at t = {data.time:.4f} s")
 
     def hold(self) -> None:
         self.data.qvel[:] = 0.0

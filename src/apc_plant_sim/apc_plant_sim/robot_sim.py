@@ -34,6 +34,7 @@ import time
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import qos_profile_system_default
@@ -57,6 +58,7 @@ from apc_plant_sim.engines import (
     EFFECT_PRESETS,
     ENGINES,
     VELOCITY_SOURCES,
+    EngineError,
     effects_from_values,
     make_engine,
 )
@@ -255,6 +257,7 @@ class RobotSimNode(Node):
         for line in chosen:
             self.get_logger().info(line)
         self._pickup_s = at_s
+        self._fault = ""  # the physics' last failure, until a period integrates again
         self.sim_time = bool(values["sim_time"])
         self._sim_wait_s = float(values["sim_wait_s"])
         self.command_topic = values["command_topic"]
@@ -344,13 +347,16 @@ class RobotSimNode(Node):
             counters[key] = getattr(counts, key)
         for name, value in counts.clipped_per_joint.items():
             counters[f"clipped.{name}"] = value
-        if self.driver.timed_out:
-            self.diagnostics.level = 1  # WARN
+        if self._fault:
+            self.diagnostics.level = DiagnosticStatus.ERROR
+            self.diagnostics.message = self._fault
+        elif self.driver.timed_out:
+            self.diagnostics.level = DiagnosticStatus.WARN
             self.diagnostics.message = "command timeout: zero effort"
         elif self.driver.braked:
             self.diagnostics.message = "brakes on: waiting for the first command"
         else:
-            self.diagnostics.level = 0
+            self.diagnostics.level = DiagnosticStatus.OK
             self.diagnostics.message = "ok"
 
     def _cycle(self, now: float) -> None:
@@ -361,7 +367,18 @@ class RobotSimNode(Node):
             self._pickup_s = 0.0
             self.get_logger().info(f"t = {now - self._start:.3f} s: payload picked up")
         was_timed_out = self.driver.timed_out
-        self.driver.advance(now)
+        try:
+            self.driver.advance(now)
+            self._fault = ""
+        except EngineError as exc:
+            # The physics blew up (a command that drives the arm unstable): the arm is held
+            # where it last was, as a drive's fault stop would, and the fault is reported.
+            self.engine.hold()
+            n = self.diagnostics.count("unstable_cycles")
+            self._fault = f"physics unstable, arm held: {exc}"
+            self.get_logger().error(
+                f"{exc}; holding the arm ({n} so far)", throttle_duration_sec=1.0
+            )
         if self.driver.timed_out and not was_timed_out:
             self.get_logger().warn(
                 f"no command for {self.driver.config.command_timeout} s: applying zero effort"
