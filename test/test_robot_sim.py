@@ -202,6 +202,11 @@ def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph,
         graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
         assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
         graph.spin_until(lambda: peer.clock, 10, "/clock")
+        # The first command moves time to the next multiple of five cycles (the controllers'
+        # tick grid); every later one by five cycles exactly.
+        peer.command([0.0, 10.0, 0.0])
+        graph.spin_until(lambda: max(peer.clock) % 10_000_000 == 0, 10, "the tick grid")
+        graph.spin_for(0.05)
         for _ in range(10):
             before = max(peer.clock)
             peer.command([0.0, 10.0, 0.0])
