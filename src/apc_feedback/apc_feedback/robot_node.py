@@ -251,7 +251,15 @@ class RobotNode(LifecycleNode):
         return self.get_clock().now().nanoseconds
 
     def _log(self, level: str, text: str) -> None:
-        getattr(self.get_logger(), level)(text, throttle_duration_sec=1.0)
+        # rclpy keys a throttled line by its call site and refuses a second severity from the
+        # same site ("Logger severity cannot be changed between calls"), so each level has its own.
+        logger = self.get_logger()
+        if level == "error":
+            logger.error(text, throttle_duration_sec=1.0)
+        elif level == "warn":
+            logger.warning(text, throttle_duration_sec=1.0)
+        else:
+            logger.info(text, throttle_duration_sec=1.0)
 
     def _on_joint_state(self, msg: JointState) -> None:
         loop = self.loop
