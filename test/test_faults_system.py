@@ -1081,7 +1081,7 @@ def test_long_run_stays_bounded():
     update, errors bounded. The printed Q = 0.1 I cannot hold a payload against gravity (README:
     the error builds up over a hold), so its bound is loose; a position-weighted Q holds it within
     a few degrees. Without the guard, a 20 s hold without excitation winds trace(P) up like
-    rho^-k until updates are refused.
+    rho^-k, past 1e18.
     """
     lr = _long_run_module()
     seconds = 150.0
@@ -1128,9 +1128,11 @@ def test_long_run_stays_bounded():
         guarded_max=guarded["max_trace_p"],
         guarded_rejected=guarded["rejected_updates"],
     )
-    assert unguarded["max_trace_p"] > 1e12
+    # trace(P) winds up past 1e18 whatever the rounding (measured 1.9e20-3.8e20 with alpha
+    # perturbed by 0, +-1e-12, 1e-9); whether P then loses definiteness, so that updates are
+    # refused, depends on the rounding (0 or ~780 refused updates in the same four runs).
+    assert unguarded["max_trace_p"] > 1e18
     assert trace_by_5s[1] > 1e3 * trace_by_5s[0]  # grows like rho^-k (0.95^-500 = 1e11)
-    assert unguarded["rejected_updates"] > 0  # P lost definiteness: updates are refused
     assert guarded["max_trace_p"] <= guarded["trace_p0"] * (1 + 1e-9)
     assert guarded["rejected_updates"] == 0
     # Either way the last good estimate keeps the arm where it is while nothing moves.
