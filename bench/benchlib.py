@@ -283,6 +283,16 @@ def isolate_dds() -> str:
     return os.environ["ROS_DOMAIN_ID"]
 
 
+def log_tail(workdir: Path, tag: str, lines: int = 5) -> str:
+    """The last ``lines`` of each ``<tag>.*.log`` in ``workdir``, one line per file."""
+    tails = []
+    for log in sorted(workdir.glob(f"{tag}.*.log")):
+        text = log.read_text(errors="replace").strip().splitlines()[-lines:]
+        if text:
+            tails.append(f"{log.name}: " + " | ".join(text))
+    return "\n".join(tails)
+
+
 def stop_processes(procs: Sequence[subprocess.Popen], timeout_s: float = 5.0) -> None:
     """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends."""
     from apc_plant_sim.experiment import stop_processes as stop

@@ -101,6 +101,24 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
                 _verdict(ok),
             )
         )
+    for layout, label, target in (
+        ("composed", "controllers composed (`arm --controllers`)", True),
+        ("separate", "controllers in two processes", False),
+        ("composed_phased", "controllers composed, ticks phased to the driver", False),
+    ):
+        r = _get(d, "robot_loop", layout)
+        if r:
+            p99 = (r.get("latency_us") or {}).get("p99")
+            late = r.get("late_fraction")
+            ok = late is not None and late <= 0.01 and p99 is not None and p99 < 1000
+            rows.append(
+                (
+                    f"robot path 1 kHz (`robot_sim` + {label})",
+                    f"late {_pct(late)}, latency p99 {p99 if p99 is not None else 'n/a'} us",
+                    "<= 1 % late, p99 < 1000 us" if target else "-",
+                    _verdict(ok) if target else "-",
+                )
+            )
     for variant in (
         "three_processes_per_arm",
         "one_process_per_arm",
@@ -291,6 +309,50 @@ def markdown(d: dict[str, Any]) -> str:
             lines += _table(
                 ["variant", "late", "median us", "p99 us", "max us", "achieved Hz"], rows
             )
+
+    rl = d.get("robot_loop")
+    if rl:
+        lines += [
+            "",
+            "## Robot path at 1 kHz (`robot_sim` in its own process; latency: joint state "
+            "stamp -> command at the driver)",
+            "",
+        ]
+        rows = []
+        for layout in ("composed", "separate", "composed_phased"):
+            r = rl.get(layout)
+            if not isinstance(r, dict):
+                continue
+            lat, age, trip = (
+                r.get(k) or {} for k in ("latency_us", "state_age_at_tick_us", "tick_to_arrival_us")
+            )
+            rows.append(
+                [
+                    layout,
+                    _pct(r.get("late_fraction")),
+                    f"{r.get('held_cycles', '?')}/{r.get('cycles', '?')}",
+                    str(lat.get("median")),
+                    str(lat.get("p99")),
+                    f"{age.get('median')} / {age.get('p99')}",
+                    f"{trip.get('median')} / {trip.get('p99')}",
+                    _pct(r.get("late_after_next_cycle")),
+                    str(r.get("achieved_hz")),
+                ]
+            )
+        lines += _table(
+            [
+                "controllers",
+                "late (cycles without a new command)",
+                "held/cycles",
+                "median us",
+                "p99 us",
+                "state age at tick us (median / p99)",
+                "tick -> driver us (median / p99)",
+                "after the next cycle",
+                "driver Hz",
+            ],
+            rows,
+        )
 
     ma = d.get("multi_arm")
     if ma:

@@ -215,12 +215,7 @@ class ArmRun:
             return None
 
     def log_tail(self, lines: int = 5) -> str:
-        tails = []
-        for log in sorted(self.workdir.glob(f"{self.tag}.*.log")):
-            text = log.read_text(errors="replace").strip().splitlines()[-lines:]
-            if text:
-                tails.append(f"{log.name}: " + " | ".join(text))
-        return "\n".join(tails)
+        return benchlib.log_tail(self.workdir, self.tag, lines)
 
 
 def cpu_seconds(pid: int) -> float:

@@ -7,6 +7,8 @@ Parts, in this order (each also runs alone and then merges its figures into resu
 3. ``bench/ros_loop.py``  lockstep samples/s (one / three processes, recorder on / off) and
                           real time at 100, 500, 1000 Hz in three processes
 4. ``bench/multi_arm.py`` N = 1, 2, 5, 10 namespaced arms at 100 Hz in one ROS domain
+5. ``bench/robot_loop.py`` the robot path at 1 kHz: ``robot_sim`` + the controllers composed
+                          in one process and as two processes (late fraction, latency)
 
 Every DDS participant runs on a random ``ROS_DOMAIN_ID``, localhost only; every process
 started is stopped. About 5-6 minutes on 2 cores, under 10 (``--quick``: about 3-4). No
@@ -30,7 +32,7 @@ from typing import Any
 import benchlib
 import report
 
-PARTS = ("compute", "hotspots", "ros_loop", "multi_arm")
+PARTS = ("compute", "hotspots", "ros_loop", "multi_arm", "robot_loop")
 
 
 def run_part(name: str, quick: bool) -> dict[str, Any]:
@@ -50,6 +52,10 @@ def run_part(name: str, quick: bool) -> dict[str, Any]:
         import multi_arm
 
         return multi_arm.run(quick)
+    if name == "robot_loop":
+        import robot_loop
+
+        return robot_loop.run(quick)
     raise ValueError(name)
 
 

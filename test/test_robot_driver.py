@@ -243,3 +243,17 @@ def test_command_delay_applies_each_command_whole_periods_later():
         driver.advance(0.002 * k)
     # The first command is held for the two periods before it is due (as the arm held it).
     assert [tau[0] for tau, _ in engine.applied] == [0.0, 0.0, 0.0, 1.0, 2.0]
+
+
+def test_cycles_that_got_no_new_command_are_counted_as_held():
+    driver, _ = _driver(state_rate=1000.0)
+    driver.advance(0.000)  # braked, no command yet: not a held cycle
+    driver.offer([1.0, 2.0, 3.0], 0.0005)
+    driver.advance(0.001)  # the first command
+    driver.advance(0.002)  # none arrived: the command of 0.001 again
+    driver.offer([1.0, 2.0, 3.0], 0.0025)
+    driver.offer([1.5, 2.0, 3.0], 0.0029)  # two in one period: the newest applies, none held
+    driver.advance(0.003)
+    driver.advance(0.004)
+    assert driver.counts.held_command_cycles == 2
+    assert driver.counts.cycles == 5 and driver.counts.commands == 3

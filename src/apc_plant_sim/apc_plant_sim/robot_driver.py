@@ -148,6 +148,10 @@ class DriverCounts:
     clipped: int = 0
     clipped_per_joint: dict[str, int] = field(default_factory=dict)
     cycles: int = 0
+    #: Cycles after the first command that applied no command newer than the previous cycle's:
+    #: the controller's answer missed this write (a late or lost command), so the drive
+    #: re-applied the one it held. Over ``cycles`` it is the loop's late fraction.
+    held_command_cycles: int = 0
 
 
 def _order(names: Sequence[str], engine_names: Sequence[str], param: str) -> np.ndarray:
@@ -195,6 +199,7 @@ class RobotDriver:
         self.counts = DriverCounts()
         self._command: np.ndarray | None = None  # engine order
         self._command_time = -math.inf
+        self._fresh_command = False  # a command arrived since the last advance
         self._timed_out = False
         self._applied = np.zeros(n)  # torque over the period that ended at the last advance
         self.braked = True
@@ -227,6 +232,7 @@ class RobotDriver:
             command[self._command_index] = values
             self._command = command
             self._command_time = now
+            self._fresh_command = True
             self.counts.commands += 1
             return None
         self.counts.rejected += 1
@@ -282,6 +288,9 @@ class RobotDriver:
             self._applied = np.zeros(len(self.joint_names))
             self._sense()
             return self._applied
+        if not self.braked and not self._fresh_command:
+            self.counts.held_command_cycles += 1
+        self._fresh_command = False
         self.braked = False
         tau, timed_out = self.torque(now)
         if timed_out:

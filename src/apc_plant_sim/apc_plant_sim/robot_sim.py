@@ -343,7 +343,15 @@ class RobotSimNode(Node):
     def _sync_diagnostics(self) -> None:
         counts = self.driver.counts
         counters = self.diagnostics.counters
-        for key in ("commands", "rejected", "timeouts", "timeout_cycles", "clipped", "cycles"):
+        for key in (
+            "commands",
+            "rejected",
+            "timeouts",
+            "timeout_cycles",
+            "clipped",
+            "cycles",
+            "held_command_cycles",
+        ):
             counters[key] = getattr(counts, key)
         for name, value in counts.clipped_per_joint.items():
             counters[f"clipped.{name}"] = value

@@ -1,0 +1,279 @@
+"""The robot path at 1 kHz: ``robot_sim`` and apc's controllers over DDS, in real time.
+
+``robot_sim`` (a simulated ros2_control robot, engine ``pinocchio``, wall time, ``state_rate``
+1000 Hz, the 3-joint PUMA 560 with the 5 lb payload at the wrist centre) runs in its own
+process; the controllers of ``config/puma560_3dof_robot.yaml`` (``feedforward_node`` in robot
+mode and ``robot_node``, with computed torque: see :data:`CONTROLLER`) run at ``period`` =
+1 ms, either composed in one process (what ``arm --controllers`` does) or as two processes.
+The arm holds its start pose (the law runs every sample as it does on a move).
+Processes are ``bench/robot_proc.py``, on a random ``ROS_DOMAIN_ID``, localhost only.
+
+Per layout, ``seconds`` of steady run after a ``warmup_s`` from the first command:
+
+- ``late_fraction``: driver cycles that got no new command since the previous cycle (the
+  controller's answer missed that write, so the drive re-applied the one it held), over all
+  cycles: the driver's ``held_command_cycles`` counter (:class:`RobotDriver`);
+- ``latency_us``: from the stamp of the joint state a command was computed from (the driver's
+  clock when it read the arm and published) to the command's arrival at the driver, per
+  command; split into ``state_age_at_tick_us`` (the state's trip to ``robot_node`` plus the wait
+  for its sample tick: the two timers' phase) and ``tick_to_arrival_us`` (the law, the
+  feedforward's set point already in hand, and the command's trip);
+- layouts ``composed`` and ``separate`` activate ``robot_node`` at start (``autostart``), so
+  its timer's phase against the driver's cycle falls where it falls; ``composed_phased``
+  activates it at a driver cycle's time (:data:`TICK_PHASE_S`);
+- ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
+  their state (the ``ros_loop`` definition of a late sample).
+
+    .venv/bin/python bench/robot_loop.py [--seconds 10] [--quick] [--no-write]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import benchlib
+import numpy as np
+
+ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
+CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
+RATE_HZ = 1000
+LAYOUTS = ("composed", "separate", "composed_phased")
+#: composed_phased: as composed, but robot_node is activated at a driver cycle's time (this
+#: long after a joint state's stamp) instead of whenever it starts: its sample timer then ticks
+#: at a fixed phase of the driver's cycle, after the state has arrived (activation and the
+#: timer's first wait put the ticks ~0.2-0.4 ms after the state), with time for the command
+#: to reach the driver before its next cycle. robot_node's own activation has no such phase.
+TICK_PHASE_S = 0.0
+#: The law at T = 1 ms. The adaptive law with either preset (recommended or paper, tuned at
+#: T = 10 ms) drives every joint to its effort limit within 0.1 s at T = 1 ms; computed torque
+#: (Kp = 100, Kv = 20) holds the arm. The adaptive law costs ~20 us more per sample
+#: (``bench/compute.py``), small beside the latencies measured here.
+CONTROLLER = "computed_torque"
+
+#: robot_sim's side: the README's "Running on a robot" example at 1 kHz in wall time.
+ROBOT_SIM_PARAMS: dict[str, Any] = {
+    "robot_description_path": "puma560_3dof.urdf",
+    "engine": "pinocchio",
+    "state_rate": float(RATE_HZ),
+    "payload.mass_kg": 2.268,
+    "payload.frame": "wrist_center",
+    "q_initial_deg": [0.0, -45.0, -45.0],
+}
+
+
+def _yaml_value(value: Any) -> str:
+    return json.dumps(value)  # JSON scalars and lists are YAML
+
+
+def write_robot_sim_params(path: Path) -> None:
+    lines = ["robot_sim:", "  ros__parameters:"]
+    lines += [f"    {k}: {_yaml_value(v)}" for k, v in ROBOT_SIM_PARAMS.items()]
+    path.write_text("\n".join(lines) + "\n")
+
+
+class RobotRun:
+    """The processes of one run: robot_sim, then the controllers (composed or apart)."""
+
+    def __init__(self, workdir: Path, tag: str, layout: str) -> None:
+        self.workdir, self.tag, self.layout = workdir, tag, layout
+        self.sim_params = workdir / f"{tag}.robot_sim.yaml"
+        write_robot_sim_params(self.sim_params)
+        self.started_file = workdir / f"{tag}.started"
+        self.procs: list[subprocess.Popen] = []
+
+    def out(self, role: str) -> Path:
+        return self.workdir / f"{self.tag}.{role}.json"
+
+    def _spawn(self, role: str, params: Path, *extra: str) -> subprocess.Popen:
+        cmd = [sys.executable, str(ROBOT_PROC), "--role", role, "--params", str(params)]
+        cmd += ["--out", str(self.out(role)), *extra]
+        log = open(self.workdir / f"{self.tag}.{role}.log", "w")
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy())
+        log.close()
+        self.procs.append(proc)
+        return proc
+
+    def start(self) -> None:
+        self._spawn("robot_sim", self.sim_params, "--started", str(self.started_file))
+        period = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={CONTROLLER}"]
+        if self.layout == "composed":
+            self._spawn("controllers", CONTROLLERS_FILE, *period)
+        elif self.layout == "composed_phased":
+            phased = ["-p", "robot_node:autostart:=false", "--tick-phase", str(TICK_PHASE_S)]
+            self._spawn("controllers", CONTROLLERS_FILE, *period, *phased)
+        else:
+            self._spawn("feedforward", CONTROLLERS_FILE, *period)
+            self._spawn("robot_node", CONTROLLERS_FILE, *period)
+
+    def started_at(self) -> float | None:
+        try:
+            return float(self.started_file.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def run(self, seconds: float, timeout_s: float = 60.0) -> None:
+        """Start, wait for the first command, run ``seconds``, stop every process."""
+        t0 = time.monotonic()
+        try:
+            self.start()
+            while (started := self.started_at()) is None:
+                for p in self.procs:
+                    if p.poll() is not None:
+                        raise RuntimeError(f"{self.tag}: a process exited\n{self.log_tail()}")
+                if time.monotonic() - t0 > timeout_s:
+                    raise RuntimeError(
+                        f"{self.tag}: no command in {timeout_s} s\n{self.log_tail()}"
+                    )
+                time.sleep(0.05)
+            time.sleep(max(0.0, started + seconds - time.monotonic()))
+        finally:
+            # The controllers first: the driver then notes no command after the window ends.
+            benchlib.stop_processes(self.procs[1:])
+            benchlib.stop_processes(self.procs[:1])
+
+    def result(self, role: str) -> dict[str, Any]:
+        try:
+            return json.loads(self.out(role).read_text())
+        except (OSError, ValueError):
+            raise RuntimeError(f"{self.tag}: no {role} result\n{self.log_tail()}") from None
+
+    def log_tail(self, lines: int = 5) -> str:
+        return benchlib.log_tail(self.workdir, self.tag, lines)
+
+
+# ---------------------------------------------------------------------------------- analysis
+def analyse(
+    driver: dict[str, Any], controller: dict[str, Any], warmup_s: float, seconds: float
+) -> dict[str, Any]:
+    """Late fraction and latencies over the window ``[first command + warmup_s, + seconds)``."""
+    arrivals = driver["commands"]
+    if not arrivals or not driver["cycles"]:
+        raise RuntimeError("the driver took no command")
+    t_from = arrivals[0][1] + warmup_s
+    t_to = t_from + seconds
+    cycles = np.asarray([c[0] for c in driver["cycles"]], dtype=float)
+    held = np.asarray([c[1] for c in driver["cycles"]], dtype=bool)
+    window = (cycles >= t_from) & (cycles < t_to)
+    # The command each arrival is: by its data (floats cross DDS bit for bit).
+    # Equal data (a command clipped to the limits, a still arm) arrive in the order sent.
+    sent: dict[tuple[float, ...], deque[tuple[int, int, int]]] = {}
+    duplicates = 0
+    for data, state_ns, tick_ns, publish_ns in controller["sent"]:
+        queue = sent.setdefault(tuple(data), deque())
+        duplicates += bool(queue)
+        queue.append((state_ns, tick_ns, publish_ns))
+    latency, age, tick_to_arrival, late_next = [], [], [], []
+    unmatched = 0
+    for data, arrival in arrivals:
+        queue = sent.get(tuple(data))
+        match = queue.popleft() if queue else None
+        if not t_from <= arrival < t_to:
+            continue
+        if match is None or match[0] < 0:
+            unmatched += 1
+            continue
+        state_s, tick_s = match[0] * 1e-9, match[1] * 1e-9
+        latency.append(arrival - state_s)
+        age.append(tick_s - state_s)
+        tick_to_arrival.append(arrival - tick_s)
+        # The driver's first cycle after the state's own (the state is read at a cycle).
+        i = int(np.searchsorted(cycles, state_s + 1e-7, side="left"))
+        if i < cycles.size:  # else the run ended before that cycle
+            late_next.append(arrival > cycles[i])
+    n_cycles = int(window.sum())
+    n_held = int(held[window].sum())
+    intervals = np.diff(cycles[window])
+    return {
+        "late_fraction": round(n_held / n_cycles, 5) if n_cycles else None,
+        "held_cycles": n_held,
+        "cycles": n_cycles,
+        "achieved_hz": round(float(1.0 / intervals.mean()), 1) if intervals.size else None,
+        "cycle_interval_us": benchlib.latency_stats(intervals),
+        "latency_us": benchlib.latency_stats(latency),
+        "state_age_at_tick_us": benchlib.latency_stats(age),
+        "tick_to_arrival_us": benchlib.latency_stats(tick_to_arrival),
+        "late_after_next_cycle": round(float(np.mean(late_next)), 5) if late_next else None,
+        "commands_matched": len(latency),
+        "commands_unmatched": unmatched,
+        "duplicate_commands": duplicates,
+        "controller_counters": {
+            k: v
+            for k, v in controller.get("counters", {}).items()
+            if k
+            in (
+                "samples_taken",
+                "missed_ticks",
+                "missed_setpoint",
+                "late_setpoints",
+                "no_new_state",
+                "watchdog",
+                "stale",
+            )
+        },
+        "driver_counts": driver["counts"],
+    }
+
+
+def measure(workdir: Path, layout: str, seconds: float, warmup_s: float) -> dict[str, Any]:
+    run = RobotRun(workdir, f"robot_{layout}", layout)
+    run.run(seconds + warmup_s + 0.2)
+    role = "robot_node" if layout == "separate" else "controllers"
+    out = analyse(run.result("robot_sim"), run.result(role), warmup_s, seconds)
+    out["seconds"], out["warmup_s"] = seconds, warmup_s
+    lat = out["latency_us"]
+    benchlib.progress(
+        f"robot 1 kHz {layout}: late {100 * (out['late_fraction'] or 0):.2f} % "
+        f"({out['held_cycles']}/{out['cycles']}), latency median {lat.get('median')} us, "
+        f"p99 {lat.get('p99')} us (state age at tick median "
+        f"{out['state_age_at_tick_us'].get('median')} us), achieved {out['achieved_hz']} Hz"
+    )
+    return out
+
+
+def run(quick: bool = False, seconds: float | None = None) -> dict[str, Any]:
+    benchlib.isolate_dds()
+    seconds = seconds if seconds is not None else (3.0 if quick else 10.0)
+    warmup_s = 0.5 if seconds >= 2.0 else 0.2
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="apc_bench_") as tmp:
+        for layout in LAYOUTS:
+            out[layout] = measure(Path(tmp), layout, seconds, warmup_s)
+    out["settings"] = {
+        "robot": "robot_sim, engine pinocchio, wall time, state_rate 1000 Hz, 3-joint PUMA 560, "
+        "2.268 kg at wrist_center, holding q = [0, -45, -45] deg",
+        "controllers": "config/puma560_3dof_robot.yaml with period 0.001 s: feedforward_node "
+        f"(mode robot, lookahead 1) + robot_node (controller {CONTROLLER}; the adaptive law's "
+        "presets, tuned at T = 10 ms, drive the arm to its effort limits at T = 1 ms)",
+        "layouts": "composed: feedforward + robot_node on one events executor (arm "
+        "--controllers); separate: one process each; composed_phased: composed, robot_node "
+        f"activated {TICK_PHASE_S * 1e3:g} ms after a joint state's stamp; robot_sim always in "
+        "its own process",
+        "late": "driver cycles with no command arrived since the previous cycle / cycles",
+        "latency": "joint state stamp (driver clock at read) -> command taken by the driver",
+    }
+    return {"robot_loop": out}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, help="steady seconds per layout (default 10)")
+    parser.add_argument("--quick", action="store_true", help="3 s per layout")
+    parser.add_argument("--no-write", action="store_true", help="print only")
+    args = parser.parse_args(argv)
+    t0 = time.monotonic()
+    benchlib.emit(run(args.quick, args.seconds), "robot_loop", t0, write=not args.no_write)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""One benchmark process of the robot path: ``robot_sim`` or apc's controllers, probed.
+
+Started by ``bench/robot_loop.py``; not meant to be run by hand.
+
+    robot_proc.py --role {robot_sim,controllers,feedforward,robot_node} --params FILE.yaml
+                  [-p NAME:=VALUE ...] --out RESULT.json [--started FILE]
+
+``controllers`` puts ``feedforward_node`` and ``robot_node`` on one executor (what
+``arm --controllers`` does); the other roles run one node. Parameters come from the ROS
+parameters file and ``-p`` overrides, as on the command line. The spin loop is ``run_node``'s
+(``spin_once`` on ``nodeutil.make_executor``, the events executor).
+
+Measured without touching ``src/``, through public attributes:
+
+- ``robot_sim``: every command its driver takes (``driver.offer``: the data and the driver's
+  clock at arrival) and every driver cycle (``driver.advance``: its time, and whether the
+  driver's ``held_command_cycles`` counter went up, i.e. no command arrived since the
+  previous cycle). ``--started`` is written at the first command.
+- ``controllers`` / ``robot_node``: for every command ``robot_node`` publishes, the data, the
+  stamp of the joint state its sample was taken from (the tick's time minus the state's age,
+  ``loop.sampler.last``), the tick's time and the publish time (all on the node clock, the
+  system clock here, as the driver's).
+
+At SIGINT the process writes what it noted to ``--out``; ``robot_loop.py`` matches commands to
+their joint states by their data (bit-exact floats across DDS).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+
+class DriverProbe:
+    """Arrival time and data of each command, time and held flag of each driver cycle."""
+
+    def __init__(self, sim: Any) -> None:
+        driver = sim.driver
+        self.driver = driver
+        self.commands: list[tuple[list[float], float]] = []
+        self.cycles: list[tuple[float, bool]] = []
+        offer, advance = driver.offer, driver.advance
+
+        def timed_offer(data: Any, now: float) -> str | None:
+            self.commands.append((list(data), now))
+            return offer(data, now)
+
+        def timed_advance(now: float) -> Any:
+            held = driver.counts.held_command_cycles
+            applied = advance(now)
+            self.cycles.append((now, driver.counts.held_command_cycles > held))
+            return applied
+
+        driver.offer = timed_offer
+        driver.advance = timed_advance
+
+    def dump(self) -> dict[str, Any]:
+        counts = self.driver.counts
+        return {
+            "commands": self.commands,
+            "cycles": self.cycles,
+            "counts": {k: v for k, v in vars(counts).items() if isinstance(v, int)},
+        }
+
+
+class CommandProbe:
+    """For each command ``robot_node`` publishes: data, state stamp, tick and publish time."""
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        self.sent: list[tuple[list[float], int, int, int]] = []
+        self._state_ns = -1
+        self._tick_ns = -1
+        loop = node.loop
+        tick, publish = loop.tick, node._publish
+
+        def timed_tick(now_ns: int) -> Any:
+            step = tick(now_ns)
+            take = loop.sampler.last
+            if take.sample is not None:
+                self._state_ns, self._tick_ns = now_ns - take.age_ns, now_ns
+            return step
+
+        def timed_publish(step: Any) -> None:
+            publish(step)
+            if step.command is not None:
+                now_ns = node.get_clock().now().nanoseconds
+                self.sent.append((step.command.tolist(), self._state_ns, self._tick_ns, now_ns))
+
+        loop.tick = timed_tick
+        node._publish = timed_publish
+
+    def dump(self) -> dict[str, Any]:
+        return {"sent": self.sent, "counters": dict(self.node.diagnostics.counters)}
+
+
+def _activate_at_phase(node: Any, phase_s: float) -> bool:
+    """Activate ``node`` at ``phase_s`` after a joint state's stamp once one has arrived."""
+    newest = node.loop.sampler.newest
+    if newest is None:
+        return False
+    period_ns = node.loop.period_ns
+    now_ns = node.get_clock().now().nanoseconds
+    target = newest.stamp_ns + round(phase_s * 1e9)
+    while target < now_ns + 100_000:  # at least 0.1 ms ahead: time to wait precisely
+        target += period_ns
+    while (left := target - node.get_clock().now().nanoseconds) > 0:
+        time.sleep(min(left * 1e-9, 1e-4))
+    node.trigger_activate()
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--role", required=True, choices=("robot_sim", "controllers", "feedforward", "robot_node")
+    )
+    parser.add_argument("--params", required=True, help="ROS parameters file (YAML)")
+    parser.add_argument("-p", action="append", default=[], help="NAME:=VALUE override")
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--started")
+    parser.add_argument(
+        "--tick-phase",
+        type=float,
+        help="robot_node configured at start and activated this many seconds after the stamp "
+        "of a joint state (its sample timer then ticks at that phase of the driver's cycle); "
+        "give it robot_node:autostart:=false",
+    )
+    args = parser.parse_args(argv)
+
+    from apc_core.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
+    from apc_feedback.robot_node import RobotNode
+    from apc_feedforward.node import FeedforwardNode
+    from apc_plant_sim.robot_sim import RobotSimNode
+
+    cli = ["--ros-args", "--params-file", args.params]
+    for item in args.p:
+        cli += ["-p", item]
+    rclpy.init(args=["robot_proc"])
+    context = rclpy.get_default_context()
+    nodes: list[Any] = []
+    probe: DriverProbe | CommandProbe | None = None
+    executor = None
+    started = False
+    try:
+        if args.role == "robot_sim":
+            sim = RobotSimNode(cli_args=cli)
+            probe = DriverProbe(sim)
+            nodes.append(sim)
+        if args.role in ("feedforward", "controllers"):
+            nodes.append(FeedforwardNode(cli_args=cli))
+        if args.role in ("robot_node", "controllers"):
+            robot = RobotNode(cli_args=cli)  # autostart: configured and active here
+            if args.tick_phase is not None:
+                robot.trigger_configure()
+            probe = CommandProbe(robot)
+            nodes.append(robot)
+        executor = make_executor("events", context)
+        for node in nodes:
+            executor.add_node(node)
+        while spin_once_or_stop(executor):
+            if args.tick_phase is not None and isinstance(probe, CommandProbe):
+                if _activate_at_phase(probe.node, args.tick_phase):
+                    args.tick_phase = None
+            if not started and args.started and isinstance(probe, DriverProbe):
+                if probe.driver.has_command:
+                    Path(args.started).write_text(f"{time.monotonic()}\n")
+                    started = True
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        Path(args.out).write_text(json.dumps(probe.dump() if probe is not None else {}))
+        destroy_nodes(nodes, executor=executor)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

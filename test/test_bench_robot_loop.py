@@ -1,0 +1,64 @@
+"""``bench/robot_loop.py``: its analysis on synthetic records, and a 1 s run over DDS."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+import robot_loop  # noqa: E402
+
+T0 = 1000.0  # driver clock (s)
+
+
+def _records() -> tuple[dict, dict]:
+    """Driver cycles every 1 ms; command i computed from state i, 0.3 ms after it, except
+    command 5 (arrives 1.2 ms after its state: after the next cycle) and a repeated value."""
+    cycles, arrivals, sent = [], [], []
+    for i in range(10):
+        t = T0 + i * 1e-3
+        cycles.append((t, i == 6))  # the cycle after the late command got none
+        state_ns = round(t * 1e9)
+        delay = 1.2e-3 if i == 5 else 0.3e-3
+        data = [1.0, 2.0, 3.0] if i in (2, 3) else [float(i), 0.0, 0.0]
+        sent.append((data, state_ns, state_ns + 100_000, state_ns + 200_000))
+        arrivals.append((data, t + delay))
+    driver = {"commands": arrivals, "cycles": cycles, "counts": {}}
+    return driver, {"sent": sent, "counters": {"samples_taken": 10}}
+
+
+def test_analysis_matches_commands_to_their_states_in_order_and_counts_late_cycles():
+    driver, controller = _records()
+    out = robot_loop.analyse(driver, controller, warmup_s=0.0, seconds=1.0)
+    # The window opens at the first command's arrival: cycle 0 comes before it.
+    assert out["cycles"] == 9 and out["held_cycles"] == 1
+    assert out["late_fraction"] == pytest.approx(1 / 9, abs=1e-5)
+    assert out["commands_matched"] == 10 and out["commands_unmatched"] == 0
+    assert out["duplicate_commands"] == 1
+    assert out["latency_us"]["max"] == pytest.approx(1200.0, abs=0.5)
+    assert out["latency_us"]["median"] == pytest.approx(300.0, abs=0.5)
+    assert out["state_age_at_tick_us"]["median"] == pytest.approx(100.0, abs=0.5)
+    assert out["late_after_next_cycle"] == pytest.approx(1 / 9, abs=1e-5)  # 9 has no next
+
+
+def test_analysis_without_commands_is_an_error():
+    with pytest.raises(RuntimeError, match="no command"):
+        robot_loop.analyse({"commands": [], "cycles": []}, {"sent": []}, 0.0, 1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.ros
+def test_one_second_run_of_both_layouts_gives_the_figures():
+    out = robot_loop.run(seconds=1.0)["robot_loop"]
+    for layout in robot_loop.LAYOUTS:
+        r = out[layout]
+        for key in ("late_fraction", "latency_us", "state_age_at_tick_us", "tick_to_arrival_us"):
+            assert r[key] is not None, (layout, key)
+        assert r["cycles"] > 500 and r["commands_matched"] > 0, r
+        assert r["latency_us"]["n"] == r["commands_matched"]
+    assert "settings" in out
