@@ -18,9 +18,11 @@ Per layout, ``seconds`` of steady run after a ``warmup_s`` from the first comman
   command; split into ``state_age_at_tick_us`` (the state's trip to ``robot_node`` plus the wait
   for its sample tick: the two timers' phase) and ``tick_to_arrival_us`` (the law, the
   feedforward's set point already in hand, and the command's trip);
-- layouts ``composed`` and ``separate`` activate ``robot_node`` at start (``autostart``), so
-  its timer's phase against the driver's cycle falls where it falls; ``composed_phased``
-  activates it at a driver cycle's time (:data:`TICK_PHASE_S`);
+- ``robot_node`` is activated once the feedforward is matched and a joint state is in (a start
+  sample sent before the feedforward listens is lost, and robot_node then never commands):
+  in ``composed`` and ``separate`` its timer's phase against the driver's cycle falls where
+  that happens; ``composed_phased`` activates it at a driver cycle's time
+  (:data:`TICK_PHASE_S`);
 - ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
   their state (the ``ros_loop`` definition of a late sample).
 
@@ -109,7 +111,7 @@ class RobotRun:
         if self.layout == "composed":
             self._spawn("controllers", CONTROLLERS_FILE, *period)
         elif self.layout == "composed_phased":
-            phased = ["-p", "robot_node:autostart:=false", "--tick-phase", str(TICK_PHASE_S)]
+            phased = ["--tick-phase", str(TICK_PHASE_S)]
             self._spawn("controllers", CONTROLLERS_FILE, *period, *phased)
         else:
             self._spawn("feedforward", CONTROLLERS_FILE, *period)

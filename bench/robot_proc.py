@@ -16,7 +16,9 @@ Measured without touching ``src/``, through public attributes:
   clock at arrival) and every driver cycle (``driver.advance``: its time, and whether the
   driver's ``held_command_cycles`` counter went up, i.e. no command arrived since the
   previous cycle). ``--started`` is written at the first command.
-- ``controllers`` / ``robot_node``: for every command ``robot_node`` publishes, the data, the
+- ``controllers`` / ``robot_node``: ``robot_node`` is configured at start and activated once the
+  feedforward is matched and a joint state has arrived (``--tick-phase``: at that phase of the
+  driver's cycle). For every command ``robot_node`` publishes, the data, the
   stamp of the joint state its sample was taken from (the tick's time minus the state's age,
   ``loop.sampler.last``), the tick's time and the publish time (all on the node clock, the
   system clock here, as the driver's).
@@ -101,18 +103,33 @@ class CommandProbe:
         return {"sent": self.sent, "counters": dict(self.node.diagnostics.counters)}
 
 
-def _activate_at_phase(node: Any, phase_s: float) -> bool:
-    """Activate ``node`` at ``phase_s`` after a joint state's stamp once one has arrived."""
+#: Seconds between seeing the feedforward in the graph and activating: the graph can list an
+#: endpoint before DDS has matched it, and a start sample or its set point lost then leaves
+#: robot_node waiting for that set point for ever (it sends the start once).
+MATCH_SETTLE_S = 0.5
+
+
+def _activate(node: Any, phase_s: float | None, heard_at: list[float]) -> bool:
+    """Activate ``node`` :data:`MATCH_SETTLE_S` after the feedforward is in the graph both
+    ways, with a joint state in; with ``phase_s``, at that long after a joint state's stamp.
+    True once done."""
+    from apc_core import wire
+
     newest = node.loop.sampler.newest
-    if newest is None:
+    heard = node.sample_pub.get_subscription_count() > 0 and node.count_publishers(wire.SETPOINT)
+    if newest is None or not heard:
         return False
-    period_ns = node.loop.period_ns
-    now_ns = node.get_clock().now().nanoseconds
-    target = newest.stamp_ns + round(phase_s * 1e9)
-    while target < now_ns + 100_000:  # at least 0.1 ms ahead: time to wait precisely
-        target += period_ns
-    while (left := target - node.get_clock().now().nanoseconds) > 0:
-        time.sleep(min(left * 1e-9, 1e-4))
+    if not heard_at:
+        heard_at.append(time.monotonic())
+    if time.monotonic() - heard_at[0] < MATCH_SETTLE_S:
+        return False
+    if phase_s is not None:
+        period_ns = node.loop.period_ns
+        target = newest.stamp_ns + round(phase_s * 1e9)
+        while target < node.get_clock().now().nanoseconds + 100_000:  # 0.1 ms to wait exactly
+            target += period_ns
+        while (left := target - node.get_clock().now().nanoseconds) > 0:
+            time.sleep(min(left * 1e-9, 1e-4))
     node.trigger_activate()
     return True
 
@@ -129,9 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--tick-phase",
         type=float,
-        help="robot_node configured at start and activated this many seconds after the stamp "
-        "of a joint state (its sample timer then ticks at that phase of the driver's cycle); "
-        "give it robot_node:autostart:=false",
+        help="activate robot_node this many seconds after the stamp of a joint state (its "
+        "sample timer then ticks at that phase of the driver's cycle)",
     )
     args = parser.parse_args(argv)
 
@@ -149,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     probe: DriverProbe | CommandProbe | None = None
     executor = None
     started = False
+    activated = False
+    heard_at: list[float] = []
     try:
         if args.role == "robot_sim":
             sim = RobotSimNode(cli_args=cli)
@@ -157,18 +175,18 @@ def main(argv: list[str] | None = None) -> int:
         if args.role in ("feedforward", "controllers"):
             nodes.append(FeedforwardNode(cli_args=cli))
         if args.role in ("robot_node", "controllers"):
-            robot = RobotNode(cli_args=cli)  # autostart: configured and active here
-            if args.tick_phase is not None:
-                robot.trigger_configure()
+            # Configured here, activated below once the feedforward listens (as the README's
+            # order for separate processes): a start sample sent before is lost.
+            robot = RobotNode(cli_args=[*cli, "-p", "robot_node:autostart:=false"])
+            robot.trigger_configure()
             probe = CommandProbe(robot)
             nodes.append(robot)
         executor = make_executor("events", context)
         for node in nodes:
             executor.add_node(node)
         while spin_once_or_stop(executor):
-            if args.tick_phase is not None and isinstance(probe, CommandProbe):
-                if _activate_at_phase(probe.node, args.tick_phase):
-                    args.tick_phase = None
+            if isinstance(probe, CommandProbe) and not activated:
+                activated = _activate(probe.node, args.tick_phase, heard_at)
             if not started and args.started and isinstance(probe, DriverProbe):
                 if probe.driver.has_command:
                     Path(args.started).write_text(f"{time.monotonic()}\n")
