@@ -17,7 +17,9 @@ import dataclasses
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
+
+_Config = TypeVar("_Config")
 
 if TYPE_CHECKING:
     from rcl_interfaces.msg import ParameterDescriptor
@@ -162,6 +164,19 @@ def setting(
     """
     meta = {"description": description, "low": low, "high": high, "runtime": runtime}
     return dataclasses.field(default=default, metadata=meta)
+
+
+def settings_from(
+    cls: type[_Config], values: Mapping[str, Any], error: type[Exception], what: str
+) -> _Config:
+    """The config dataclass ``cls`` from a plain mapping (node parameter values, a scenario
+    file): an unknown key raises ``error`` naming it (``unknown <what> 'key'``); a list becomes a
+    tuple, since ROS array parameters arrive as lists and the frozen configs hold tuples."""
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise error(f"unknown {what} {unknown[0]!r}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
 def _settings(cls: type) -> list[dataclasses.Field]:

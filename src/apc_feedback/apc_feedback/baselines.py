@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.params import check_settings, setting
+from apc_core.params import check_settings, setting, settings_from
 from apc_feedback.controller import FeedbackError, FeedbackLaw, FeedbackOutput
 
 
@@ -54,10 +54,7 @@ class PdGains:
 
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> PdGains:
-        unknown = sorted(set(values) - {"kp", "kv"})
-        if unknown:
-            raise FeedbackError(f"unknown gain parameter {unknown[0]!r}")
-        return PdGains(**dict(values))
+        return settings_from(PdGains, values, FeedbackError, "gain parameter")
 
 
 class _RuntimeGains:
@@ -165,11 +162,7 @@ class PidGains:
 
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> PidGains:
-        known = {"p", "i", "d", "i_clamp", "bandwidth", "i_clamp_fraction"}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise FeedbackError(f"unknown gain parameter {unknown[0]!r}")
-        return PidGains(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+        return settings_from(PidGains, values, FeedbackError, "gain parameter")
 
     def tuned(self, model: pin.Model, q0: np.ndarray, effort_limit: np.ndarray) -> PidGains:
         """These gains with every empty entry filled by the tuning rule at pose ``q0``."""

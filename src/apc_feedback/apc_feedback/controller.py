@@ -17,13 +17,13 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
-from apc_core.params import SettingError, check_settings, setting
+from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import PAPER_PERIOD_S
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
@@ -282,11 +282,7 @@ class AdaptiveConfig:
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> AdaptiveConfig:
         """Build from a plain mapping; an unknown key is rejected with its name."""
-        known = {f.name for f in fields(AdaptiveConfig)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise FeedbackError(f"unknown adaptive-controller parameter {unknown[0]!r}")
-        return AdaptiveConfig(**dict(values))
+        return settings_from(AdaptiveConfig, values, FeedbackError, "adaptive-controller parameter")
 
 
 class AdaptiveFeedback(FeedbackLaw):

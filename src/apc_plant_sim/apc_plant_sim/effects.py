@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
 
+from apc_core.params import settings_from
 from apc_core.robot import Robot
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError, PlantStep
 
@@ -151,12 +152,7 @@ class ArmEffects:
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> ArmEffects:
         """Build from a plain mapping; an unknown key is rejected with its name."""
-        known = {f.name for f in fields(ArmEffects)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise EffectsError(f"unknown arm effect {unknown[0]!r}")
-        clean = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-        return ArmEffects(**clean)
+        return settings_from(ArmEffects, values, EffectsError, "arm effect")
 
     def per_joint(self, name: str, n: int) -> np.ndarray:
         """Field ``name`` as an (n,) array; zeros when it is off."""

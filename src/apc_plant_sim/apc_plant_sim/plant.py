@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 import pinocchio as pin
 
-from apc_core.params import SettingError, check_settings, setting
+from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Robot
 
 
@@ -87,11 +87,7 @@ class PlantConfig:
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> PlantConfig:
         """Build from a plain mapping (e.g. ROS parameters); unknown keys are rejected."""
-        known = {"period", "step", "enforce_torque_limits", "forward_dynamics"}
-        unknown = set(values) - known
-        if unknown:
-            raise PlantError(f"unknown plant parameter(s): {sorted(unknown)}")
-        return PlantConfig(**dict(values))
+        return settings_from(PlantConfig, values, PlantError, "plant parameter")
 
 
 @dataclass(frozen=True)
