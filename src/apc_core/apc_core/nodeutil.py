@@ -7,8 +7,7 @@
   exit code 2, clean shutdown on SIGINT/SIGTERM (Jazzy: try/finally and ``try_shutdown``).
 - :func:`reject`, :func:`guarded` — the border: a bad message is counted and logged
   (throttled), and an exception in a callback is caught and counted instead of ending the
-  node's spin. :func:`apc_core.wire.sample_index` (re-exported here) refuses a stamp off the
-  sample grid.
+  node's spin.
 """
 
 from __future__ import annotations
@@ -47,7 +46,6 @@ from apc_core.robot import (
     with_inertia_error,
 )
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
-from apc_core.wire import sample_index as sample_index  # the nodes take it from here
 
 #: Where ``config/`` is in a source checkout (src/apc_core/apc_core/ -> repo root).
 _REPO_CONFIG = Path(__file__).resolve().parents[3] / "config"

@@ -46,7 +46,6 @@ from apc_core.nodeutil import (
     guarded,
     reject,
     run_node,
-    sample_index,
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled
@@ -141,7 +140,7 @@ class FeedforwardNode(Node):
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             sample = wire.joint_state_to_arrays(msg, self.joint_names, require=("position",))
-            k = sample_index(sample.stamp_ns, self.period_ns)
+            k = wire.sample_index(sample.stamp_ns, self.period_ns)
             if msg.header.frame_id == wire.START_FRAME:
                 self._restart(k)
             due = self.lookahead.due(sample.stamp_ns, k)
