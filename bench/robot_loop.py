@@ -8,7 +8,8 @@ mode and ``robot_node``, with computed torque: see :data:`CONTROLLER`) run at ``
 The arm holds its start pose (the law runs every sample as it does on a move).
 Processes are ``bench/robot_proc.py``, on a random ``ROS_DOMAIN_ID``, localhost only.
 
-Per layout, ``seconds`` of steady run after a ``warmup_s`` from the first command:
+Per layout, ``runs`` runs (pooled) of ``seconds`` of steady run after a ``warmup_s`` from the
+first command:
 
 - ``late_fraction``: driver cycles that got no new command since the previous cycle (the
   controller's answer missed that write, so the drive re-applied the one it held), over all
@@ -26,7 +27,7 @@ Per layout, ``seconds`` of steady run after a ``warmup_s`` from the first comman
 - ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
   their state (the ``ros_loop`` definition of a late sample).
 
-    .venv/bin/python bench/robot_loop.py [--seconds 10] [--quick] [--no-write]
+    .venv/bin/python bench/robot_loop.py [--seconds 10] [--runs 3] [--quick] [--no-write]
 """
 
 from __future__ import annotations
@@ -154,102 +155,145 @@ class RobotRun:
 
 
 # ---------------------------------------------------------------------------------- analysis
-def analyse(
+COUNTERS = (
+    "samples_taken",
+    "missed_ticks",
+    "missed_setpoint",
+    "late_setpoints",
+    "no_new_state",
+    "watchdog",
+    "stale",
+)
+
+
+def run_samples(
     driver: dict[str, Any], controller: dict[str, Any], warmup_s: float, seconds: float
 ) -> dict[str, Any]:
-    """Late fraction and latencies over the window ``[first command + warmup_s, + seconds)``."""
+    """One run's figures per driver cycle and per command, over the window
+    ``[first command + warmup_s, + seconds)`` (times in s from the first command)."""
     arrivals = driver["commands"]
     if not arrivals or not driver["cycles"]:
         raise RuntimeError("the driver took no command")
-    t_from = arrivals[0][1] + warmup_s
-    t_to = t_from + seconds
-    cycles = np.asarray([c[0] for c in driver["cycles"]], dtype=float)
+    # Relative times: a float64 of ~1.8e9 s resolves only ~0.24 us.
+    t0 = arrivals[0][1]
+    t0_ns = round(t0 * 1e9)
+    cycles = np.asarray([c[0] for c in driver["cycles"]], dtype=float) - t0
     held = np.asarray([c[1] for c in driver["cycles"]], dtype=bool)
-    window = (cycles >= t_from) & (cycles < t_to)
+    window = (cycles >= warmup_s) & (cycles < warmup_s + seconds)
     # The command each arrival is: by its data (floats cross DDS bit for bit).
     # Equal data (a command clipped to the limits, a still arm) arrive in the order sent.
-    sent: dict[tuple[float, ...], deque[tuple[int, int, int]]] = {}
+    sent: dict[tuple[float, ...], deque[tuple[int, int]]] = {}
     duplicates = 0
-    for data, state_ns, tick_ns, publish_ns in controller["sent"]:
+    for data, state_ns, tick_ns, _publish_ns in controller["sent"]:
         queue = sent.setdefault(tuple(data), deque())
         duplicates += bool(queue)
-        queue.append((state_ns, tick_ns, publish_ns))
-    latency, age, tick_to_arrival, late_next = [], [], [], []
+        queue.append((state_ns, tick_ns))
+    latency, age, trip, late_next = [], [], [], []
     unmatched = 0
-    for data, arrival in arrivals:
+    period = 1.0 / RATE_HZ
+    for data, arrival_abs in arrivals:
         queue = sent.get(tuple(data))
         match = queue.popleft() if queue else None
-        if not t_from <= arrival < t_to:
+        arrival = arrival_abs - t0
+        if not warmup_s <= arrival < warmup_s + seconds:
             continue
         if match is None or match[0] < 0:
             unmatched += 1
             continue
-        state_s, tick_s = match[0] * 1e-9, match[1] * 1e-9
-        latency.append(arrival - state_s)
-        age.append(tick_s - state_s)
-        tick_to_arrival.append(arrival - tick_s)
-        # The driver's first cycle after the state's own (the state is read at a cycle).
-        i = int(np.searchsorted(cycles, state_s + 1e-7, side="left"))
+        state, tick = (match[0] - t0_ns) * 1e-9, (match[1] - t0_ns) * 1e-9
+        latency.append(arrival - state)
+        age.append(tick - state)
+        trip.append(arrival - tick)
+        # The driver's next cycle after the one that read the state (stamped at its time).
+        i = int(np.searchsorted(cycles, state + 0.5 * period))
         if i < cycles.size:  # else the run ended before that cycle
             late_next.append(arrival > cycles[i])
-    n_cycles = int(window.sum())
-    n_held = int(held[window].sum())
-    intervals = np.diff(cycles[window])
+    counters = controller.get("counters", {})
     return {
-        "late_fraction": round(n_held / n_cycles, 5) if n_cycles else None,
-        "held_cycles": n_held,
-        "cycles": n_cycles,
-        "achieved_hz": round(float(1.0 / intervals.mean()), 1) if intervals.size else None,
-        "cycle_interval_us": benchlib.latency_stats(intervals),
-        "latency_us": benchlib.latency_stats(latency),
-        "state_age_at_tick_us": benchlib.latency_stats(age),
-        "tick_to_arrival_us": benchlib.latency_stats(tick_to_arrival),
-        "late_after_next_cycle": round(float(np.mean(late_next)), 5) if late_next else None,
-        "commands_matched": len(latency),
-        "commands_unmatched": unmatched,
-        "duplicate_commands": duplicates,
-        "controller_counters": {
-            k: v
-            for k, v in controller.get("counters", {}).items()
-            if k
-            in (
-                "samples_taken",
-                "missed_ticks",
-                "missed_setpoint",
-                "late_setpoints",
-                "no_new_state",
-                "watchdog",
-                "stale",
-            )
-        },
-        "driver_counts": driver["counts"],
+        "held": held[window],
+        "intervals": np.diff(cycles[window]),
+        "latency": np.asarray(latency),
+        "age": np.asarray(age),
+        "trip": np.asarray(trip),
+        "late_next": np.asarray(late_next, dtype=bool),
+        "unmatched": unmatched,
+        "duplicates": duplicates,
+        "counters": {k: counters[k] for k in COUNTERS if k in counters},
     }
 
 
-def measure(workdir: Path, layout: str, seconds: float, warmup_s: float) -> dict[str, Any]:
-    run = RobotRun(workdir, f"robot_{layout}", layout)
-    run.run(seconds + warmup_s + 0.2)
+def summary(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The runs pooled: late fraction, latencies, and per run what sets them apart."""
+    held = np.concatenate([r["held"] for r in runs])
+    intervals = np.concatenate([r["intervals"] for r in runs])
+    late_next = np.concatenate([r["late_next"] for r in runs])
+    latency = np.concatenate([r["latency"] for r in runs])
+    counters: dict[str, int] = {}
+    for r in runs:
+        for k, v in r["counters"].items():
+            counters[k] = counters.get(k, 0) + v
+    return {
+        "late_fraction": round(float(held.mean()), 5) if held.size else None,
+        "held_cycles": int(held.sum()),
+        "cycles": int(held.size),
+        "late_fraction_per_run": [round(float(r["held"].mean()), 4) for r in runs],
+        "state_age_median_us_per_run": [
+            round(float(1e6 * np.median(r["age"])), 1) if r["age"].size else None for r in runs
+        ],
+        "achieved_hz": round(float(1.0 / intervals.mean()), 1) if intervals.size else None,
+        "cycle_interval_us": benchlib.latency_stats(intervals),
+        "latency_us": benchlib.latency_stats(latency),
+        "state_age_at_tick_us": benchlib.latency_stats(np.concatenate([r["age"] for r in runs])),
+        "tick_to_arrival_us": benchlib.latency_stats(np.concatenate([r["trip"] for r in runs])),
+        "late_after_next_cycle": round(float(late_next.mean()), 5) if late_next.size else None,
+        "commands_matched": int(latency.size),
+        "commands_unmatched": sum(r["unmatched"] for r in runs),
+        "duplicate_commands": sum(r["duplicates"] for r in runs),
+        "controller_counters": counters,
+        "runs": len(runs),
+    }
+
+
+def analyse(
+    driver: dict[str, Any], controller: dict[str, Any], warmup_s: float, seconds: float
+) -> dict[str, Any]:
+    """One run's summary (see :func:`run_samples`)."""
+    return summary([run_samples(driver, controller, warmup_s, seconds)])
+
+
+def measure(
+    workdir: Path, layout: str, seconds: float, warmup_s: float, runs: int = 1
+) -> dict[str, Any]:
+    samples = []
     role = "robot_node" if layout == "separate" else "controllers"
-    out = analyse(run.result("robot_sim"), run.result(role), warmup_s, seconds)
-    out["seconds"], out["warmup_s"] = seconds, warmup_s
+    for i in range(runs):
+        run = RobotRun(workdir, f"robot_{layout}_{i}", layout)
+        run.run(seconds + warmup_s + 0.2)
+        samples.append(run_samples(run.result("robot_sim"), run.result(role), warmup_s, seconds))
+    out = summary(samples)
+    out["seconds_per_run"], out["warmup_s"] = seconds, warmup_s
     lat = out["latency_us"]
     benchlib.progress(
         f"robot 1 kHz {layout}: late {100 * (out['late_fraction'] or 0):.2f} % "
-        f"({out['held_cycles']}/{out['cycles']}), latency median {lat.get('median')} us, "
-        f"p99 {lat.get('p99')} us (state age at tick median "
-        f"{out['state_age_at_tick_us'].get('median')} us), achieved {out['achieved_hz']} Hz"
+        f"({out['held_cycles']}/{out['cycles']}; per run {out['late_fraction_per_run']}), "
+        f"latency median {lat.get('median')} us, p99 {lat.get('p99')} us (state age at tick "
+        f"median per run {out['state_age_median_us_per_run']} us), achieved "
+        f"{out['achieved_hz']} Hz"
     )
     return out
 
 
-def run(quick: bool = False, seconds: float | None = None) -> dict[str, Any]:
+def run(
+    quick: bool = False, seconds: float | None = None, runs: int | None = None
+) -> dict[str, Any]:
     benchlib.isolate_dds()
     seconds = seconds if seconds is not None else (3.0 if quick else 10.0)
+    runs = runs if runs is not None else (1 if quick else 3)
     warmup_s = 0.5 if seconds >= 2.0 else 0.2
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="apc_bench_") as tmp:
         for layout in LAYOUTS:
-            out[layout] = measure(Path(tmp), layout, seconds, warmup_s)
+            out[layout] = measure(Path(tmp), layout, seconds, warmup_s, runs)
     out["settings"] = {
         "robot": "robot_sim, engine pinocchio, wall time, state_rate 1000 Hz, 3-joint PUMA 560, "
         "2.268 kg at wrist_center, holding q = [0, -45, -45] deg",
@@ -269,11 +313,14 @@ def run(quick: bool = False, seconds: float | None = None) -> dict[str, Any]:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, help="steady seconds per layout (default 10)")
-    parser.add_argument("--quick", action="store_true", help="3 s per layout")
+    parser.add_argument("--runs", type=int, help="runs per layout, pooled (default 3)")
+    parser.add_argument("--quick", action="store_true", help="one run of 3 s per layout")
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
-    benchlib.emit(run(args.quick, args.seconds), "robot_loop", t0, write=not args.no_write)
+    benchlib.emit(
+        run(args.quick, args.seconds, args.runs), "robot_loop", t0, write=not args.no_write
+    )
     return 0
 
 
