@@ -104,7 +104,7 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     for layout, label, target in (
         ("composed", "controllers composed (`arm --controllers`)", True),
         ("separate", "controllers in two processes", False),
-        ("composed_phased", "controllers composed, ticks phased to the driver", False),
+        ("composed_late_phase", "controllers composed, ticks just before the states", False),
     ):
         r = _get(d, "robot_loop", layout)
         if r:
@@ -319,7 +319,7 @@ def markdown(d: dict[str, Any]) -> str:
             "",
         ]
         rows = []
-        for layout in ("composed", "separate", "composed_phased"):
+        for layout in ("composed", "separate", "composed_late_phase"):
             r = rl.get(layout)
             if not isinstance(r, dict):
                 continue

@@ -20,10 +20,8 @@ first command:
   for its sample tick: the two timers' phase) and ``tick_to_arrival_us`` (the law, the
   feedforward's set point already in hand, and the command's trip);
 - ``robot_node`` is activated once the feedforward is matched and a joint state is in (a start
-  sample sent before the feedforward listens is lost, and robot_node then never commands):
-  in ``composed`` and ``separate`` its timer's phase against the driver's cycle falls where
-  that happens; ``composed_phased`` activates it at a driver cycle's time
-  (:data:`TICK_PHASE_S`);
+  sample sent before the feedforward listens is lost, and robot_node then never commands), at
+  a set phase of the driver's cycle (:data:`LAYOUTS`): its sample timer free-runs from there;
 - ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
   their state (the ``ros_loop`` definition of a late sample).
 
@@ -50,13 +48,19 @@ import numpy as np
 ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
 CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
 RATE_HZ = 1000
-LAYOUTS = ("composed", "separate", "composed_phased")
-#: composed_phased: as composed, but robot_node is activated at a driver cycle's time (this
-#: long after a joint state's stamp) instead of whenever it starts: its sample timer then ticks
-#: at a fixed phase of the driver's cycle, after the state has arrived (activation and the
-#: timer's first wait put the ticks ~0.2-0.4 ms after the state), with time for the command
-#: to reach the driver before its next cycle. robot_node's own activation has no such phase.
-TICK_PHASE_S = 0.0
+#: layout -> (controllers in one process?, phase of robot_node's activation after a joint
+#: state's stamp, s). robot_node's sample timer free-runs from its activation, so that phase
+#: stays (the driver's and the node's clocks are this machine's); activation itself and the
+#: timer's wake-up add ~0.2-0.4 ms. At phase 0 the ticks come ~0.3 ms after each state (it has
+#: arrived; the command has ~0.7 ms to reach the driver before its next cycle); at 0.6 ms they
+#: come just before the next state, where a little jitter leaves a tick with no new state or
+#: a command after the driver's cycle. ``arm --controllers`` with ``autostart`` activates
+#: wherever its start falls, anywhere between the two.
+LAYOUTS: dict[str, tuple[bool, float]] = {
+    "composed": (True, 0.0),
+    "separate": (False, 0.0),
+    "composed_late_phase": (True, 0.6e-3),
+}
 #: The law at T = 1 ms. The adaptive law with either preset (recommended or paper, tuned at
 #: T = 10 ms) drives every joint to its effort limit within 0.1 s at T = 1 ms; computed torque
 #: (Kp = 100, Kv = 20) holds the arm. The adaptive law costs ~20 us more per sample
@@ -108,15 +112,14 @@ class RobotRun:
 
     def start(self) -> None:
         self._spawn("robot_sim", self.sim_params, "--started", str(self.started_file))
-        period = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={CONTROLLER}"]
-        if self.layout == "composed":
-            self._spawn("controllers", CONTROLLERS_FILE, *period)
-        elif self.layout == "composed_phased":
-            phased = ["--tick-phase", str(TICK_PHASE_S)]
-            self._spawn("controllers", CONTROLLERS_FILE, *period, *phased)
+        composed, phase = LAYOUTS[self.layout]
+        args = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={CONTROLLER}"]
+        args += ["--tick-phase", str(phase)]
+        if composed:
+            self._spawn("controllers", CONTROLLERS_FILE, *args)
         else:
-            self._spawn("feedforward", CONTROLLERS_FILE, *period)
-            self._spawn("robot_node", CONTROLLERS_FILE, *period)
+            self._spawn("feedforward", CONTROLLERS_FILE, *args)
+            self._spawn("robot_node", CONTROLLERS_FILE, *args)
 
     def started_at(self) -> float | None:
         try:
@@ -265,7 +268,7 @@ def measure(
     workdir: Path, layout: str, seconds: float, warmup_s: float, runs: int = 1
 ) -> dict[str, Any]:
     samples = []
-    role = "robot_node" if layout == "separate" else "controllers"
+    role = "controllers" if LAYOUTS[layout][0] else "robot_node"
     for i in range(runs):
         run = RobotRun(workdir, f"robot_{layout}_{i}", layout)
         run.run(seconds + warmup_s + 0.2)
@@ -301,9 +304,10 @@ def run(
         f"(mode robot, lookahead 1) + robot_node (controller {CONTROLLER}; the adaptive law's "
         "presets, tuned at T = 10 ms, drive the arm to its effort limits at T = 1 ms)",
         "layouts": "composed: feedforward + robot_node on one events executor (arm "
-        "--controllers); separate: one process each; composed_phased: composed, robot_node "
-        f"activated {TICK_PHASE_S * 1e3:g} ms after a joint state's stamp; robot_sim always in "
-        "its own process",
+        "--controllers); separate: one process each; robot_sim always in its own process; "
+        "robot_node activated at "
+        + ", ".join(f"{k} {1e3 * v[1]:g} ms" for k, v in LAYOUTS.items())
+        + " after a joint state's stamp (its ticks follow ~0.2-0.4 ms later)",
         "late": "driver cycles with no command arrived since the previous cycle / cycles",
         "latency": "joint state stamp (driver clock at read) -> command taken by the driver",
     }

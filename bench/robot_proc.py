@@ -16,12 +16,12 @@ Measured without touching ``src/``, through public attributes:
   clock at arrival) and every driver cycle (``driver.advance``: its time, and whether the
   driver's ``held_command_cycles`` counter went up, i.e. no command arrived since the
   previous cycle). ``--started`` is written at the first command.
-- ``controllers`` / ``robot_node``: ``robot_node`` is configured at start and activated once the
-  feedforward is matched and a joint state has arrived (``--tick-phase``: at that phase of the
-  driver's cycle). For every command ``robot_node`` publishes, the data, the
-  stamp of the joint state its sample was taken from (the tick's time minus the state's age,
-  ``loop.sampler.last``), the tick's time and the publish time (all on the node clock, the
-  system clock here, as the driver's).
+- ``controllers`` / ``robot_node``: ``robot_node`` is configured at start and activated once
+  the feedforward is matched and a joint state has arrived, ``--tick-phase`` seconds after a
+  joint state's stamp (its sample timer then ticks at that phase of the driver's cycle). For
+  every command ``robot_node`` publishes: the data, the stamp of the joint state its sample
+  was taken from (the tick's time minus the state's age, ``loop.sampler.last``), the tick's
+  time and the publish time (all on the node clock, the system clock here, as the driver's).
 
 At SIGINT the process writes what it noted to ``--out``; ``robot_loop.py`` matches commands to
 their joint states by their data (bit-exact floats across DDS).
@@ -109,10 +109,9 @@ class CommandProbe:
 MATCH_SETTLE_S = 0.5
 
 
-def _activate(node: Any, phase_s: float | None, heard_at: list[float]) -> bool:
+def _activate(node: Any, phase_s: float, heard_at: list[float]) -> bool:
     """Activate ``node`` :data:`MATCH_SETTLE_S` after the feedforward is in the graph both
-    ways, with a joint state in; with ``phase_s``, at that long after a joint state's stamp.
-    True once done."""
+    ways, with a joint state in, at ``phase_s`` after a joint state's stamp. True once done."""
     from apc_core import wire
 
     newest = node.loop.sampler.newest
@@ -123,13 +122,12 @@ def _activate(node: Any, phase_s: float | None, heard_at: list[float]) -> bool:
         heard_at.append(time.monotonic())
     if time.monotonic() - heard_at[0] < MATCH_SETTLE_S:
         return False
-    if phase_s is not None:
-        period_ns = node.loop.period_ns
-        target = newest.stamp_ns + round(phase_s * 1e9)
-        while target < node.get_clock().now().nanoseconds + 100_000:  # 0.1 ms to wait exactly
-            target += period_ns
-        while (left := target - node.get_clock().now().nanoseconds) > 0:
-            time.sleep(min(left * 1e-9, 1e-4))
+    period_ns = node.loop.period_ns
+    target = newest.stamp_ns + round(phase_s * 1e9)
+    while target < node.get_clock().now().nanoseconds + 100_000:  # 0.1 ms to wait exactly
+        target += period_ns
+    while (left := target - node.get_clock().now().nanoseconds) > 0:
+        time.sleep(min(left * 1e-9, 1e-4))
     node.trigger_activate()
     return True
 
@@ -146,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--tick-phase",
         type=float,
+        default=0.0,
         help="activate robot_node this many seconds after the stamp of a joint state (its "
         "sample timer then ticks at that phase of the driver's cycle)",
     )
