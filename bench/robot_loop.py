@@ -269,19 +269,21 @@ def measure(
 ) -> dict[str, Any]:
     samples = []
     role = "controllers" if LAYOUTS[layout][0] else "robot_node"
+    account = benchlib.CpuAccount()
     for i in range(runs):
         run = RobotRun(workdir, f"robot_{layout}_{i}", layout)
         run.run(seconds + warmup_s + 0.2)
         samples.append(run_samples(run.result("robot_sim"), run.result(role), warmup_s, seconds))
     out = summary(samples)
     out["seconds_per_run"], out["warmup_s"] = seconds, warmup_s
+    out["machine_load"] = account.result()  # other_cores: other jobs on the machine meanwhile
     lat = out["latency_us"]
     benchlib.progress(
         f"robot 1 kHz {layout}: late {100 * (out['late_fraction'] or 0):.2f} % "
         f"({out['held_cycles']}/{out['cycles']}; per run {out['late_fraction_per_run']}), "
         f"latency median {lat.get('median')} us, p99 {lat.get('p99')} us (state age at tick "
         f"median per run {out['state_age_median_us_per_run']} us), achieved "
-        f"{out['achieved_hz']} Hz"
+        f"{out['achieved_hz']} Hz; other jobs used {out['machine_load']['other_cores']} cores"
     )
     return out
 

@@ -11,7 +11,7 @@ Parts, in this order (each also runs alone and then merges its figures into resu
                           in one process and as two processes (late fraction, latency)
 
 Every DDS participant runs on a random ``ROS_DOMAIN_ID``, localhost only; every process
-started is stopped. About 5-6 minutes on 2 cores, under 10 (``--quick``: about 3-4). No
+started is stopped. About 7-8 minutes on 2 cores, under 10 (``--quick``: about 4). No
 figure is asserted: the Markdown table compares them with apc's targets and the paper's
 7.5 ms.
 
