@@ -338,6 +338,7 @@ def markdown(d: dict[str, Any]) -> str:
                     f"{trip.get('median')} / {trip.get('p99')}",
                     _pct(r.get("late_after_next_cycle")),
                     str(r.get("achieved_hz")),
+                    str((r.get("machine_load") or {}).get("other_cores", "")),
                 ]
             )
         lines += _table(
@@ -352,6 +353,7 @@ def markdown(d: dict[str, Any]) -> str:
                 "tick -> driver us (median / p99)",
                 "after the next cycle",
                 "driver Hz",
+                "other jobs (cores)",
             ],
             rows,
         )
