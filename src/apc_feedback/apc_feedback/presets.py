@@ -75,13 +75,6 @@ def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     }
 
 
-PRESETS = {
-    "paper": paper_settings,
-    "recommended": recommended_settings,
-    "physical": physical_settings,
-}
-
-
 #: Each preset by name: ``preset(alpha)`` gives the adaptive settings it changes.
 PRESETS: dict[str, Callable[..., dict[str, Any]]] = {
     "recommended": recommended_settings,
