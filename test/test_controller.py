@@ -295,39 +295,3 @@ def test_law_parameters_take_run_time_settings_at_the_next_sample_all_or_none(co
     none = LawParameters(_law_values(controller="none"), controller_robot)
     with pytest.raises(ConfigError, match="not used by controller 'none'"):
         none.propose({"gains.kp": 1.0})
-
-
-def test_an_indefinite_g_that_lasts_is_replaced_by_eq33_in_eq35(controller_robot):
-    """g_prior_margin: Eq. 35 keeps the identified Ĝ for G_FAILED_SAMPLES - 1 failing samples,
-    then takes Eq. 33's Ĝ at the current point; the identifier keeps its own estimate."""
-    from apc_feedback.controller import G_FAILED_SAMPLES
-
-    model = controller_robot.model
-    config = AdaptiveConfig(g_prior_margin=0.02)
-    law = AdaptiveFeedback(model, config)
-    _, _, q_d, qd_d, qdd_d = _random_sample()
-    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
-    law.update(0, q_d, qd_d, q_d, qd_d, qdd_d, u_n, None)  # Ĝ = Eq. 33's: passes
-    assert law.prior_controls == 0
-    F0, G0 = initial_model(model, q_d, qd_d, u_n, config.period)
-    g_bad = G0.copy()
-    g_bad[3:] = -g_bad[3:]  # velocity block ≈ -T D⁻¹: every eigenvalue of Ĝ_v D / T ≈ -1
-    law.rls.reset(F0, g_bad)
-    Q, R = np.diag([0.1] * 6), 1e-6 * np.eye(3)
-    dx = np.concatenate([0.01 * np.ones(3), np.zeros(3)])
-    for k in range(1, G_FAILED_SAMPLES + 1):
-        on_plan = k < G_FAILED_SAMPLES  # no error (du = 0): the identified Ĝ stays g_bad
-        q = q_d if on_plan else q_d + dx[:3]
-        out = law.update(k, q, qd_d, q_d, qd_d, qdd_d, u_n, None)
-        np.testing.assert_allclose(law.rls.G, g_bad, atol=1e-12)
-    assert law.prior_controls == 1
-    expected = one_step_control(law.rls.F, G0, law.rls.w, Q, R, dx)
-    np.testing.assert_allclose(out.du, expected, rtol=1e-9)
-    off = AdaptiveFeedback(model, AdaptiveConfig())
-    off.update(0, q_d, qd_d, q_d, qd_d, qdd_d, u_n, None)
-    off.rls.reset(F0, g_bad)
-    for k in range(1, G_FAILED_SAMPLES + 1):
-        q = q_d if k < G_FAILED_SAMPLES else q_d + dx[:3]
-        out_off = off.update(k, q, qd_d, q_d, qd_d, qdd_d, u_n, None)
-    assert off.prior_controls == 0
-    assert not np.allclose(out_off.du, out.du)

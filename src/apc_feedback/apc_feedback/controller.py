@@ -33,13 +33,6 @@ from apc_feedback.optimal import (
 )
 from apc_feedback.rls import Rls, RlsConfig, RlsError
 
-#: Consecutive samples ``Ĝ`` must fail ``g_prior_margin``'s test before Eq. 35 takes the prior:
-#: in a fast transient the identified block dips below zero for up to 2 samples and recovers
-#: (the Panda's first 0.07 s, ``test/test_defaults.py``; controlling with the prior there costs
-#: 2 deg and saturates the torque), while the divergence after a long hold lasts and doubles
-#: ``δu`` each sample (``bench/long_run.py``).
-G_FAILED_SAMPLES = 3
-
 
 class FeedbackError(SettingError):
     """Bad feedback configuration or input; ``field`` names a bad setting."""
@@ -181,16 +174,6 @@ class AdaptiveConfig:
         a double integrator carries half of each of the last two periods' inputs); the
         regressor's input is then ``δu(k) + δu(k-1)`` and the control plans over
         ``(δx(k), δu(k-1))``. 1 (default): the paper's law.
-    g_prior_margin : float
-        Control with Eq. 33's ``Ĝ`` at the current ``(q_d, qd_d, u_n)`` instead of the
-        identified one once, for ``G_FAILED_SAMPLES`` samples in a row, an eigenvalue of
-        ``Ĝ_v D(q_d) / T`` (``Ĝ_v`` Ĝ's velocity block, ``D`` the controller model's inertia;
-        ``≈ I / input_periods`` for an arm) has a real part below ``g_prior_margin /
-        input_periods``. The identifier keeps running; only Eq. 35 sees the prior. After a
-        long hold the identified block of a coupled pair of joints can turn indefinite with a
-        positive diagonal (which ``project_g`` accepts), and Eq. 35, which inverts ``Ĝ``, then
-        pushes the wrong way with a gain that doubles every sample (``bench/long_run.py``, the
-        PUMA's joints 2 and 3). 0 (default) = off, the paper's law.
     identify_min_speed : float
         No identification step while a joint's measured speed is below this at ``k-1`` or
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
@@ -264,12 +247,6 @@ class AdaptiveConfig:
     identify_min_speed: float = setting(
         0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3
     )
-    g_prior_margin: float = setting(
-        0.0,
-        "control with Eq. 33's G while an eigenvalue of G_v D / T has real part < this; 0 = off",
-        0.0,
-        1.0,
-    )
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.period) and self.period > 0.0):
@@ -339,7 +316,6 @@ class AdaptiveFeedback(FeedbackLaw):
     def __init__(self, model: pin.Model, config: AdaptiveConfig) -> None:
         super().__init__(model.nv)
         self.model = model
-        self._data = model.createData()
         limit = np.asarray(model.effortLimit, dtype=float)
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
         self.rls = Rls(model.nv, config.rls_config(model.nv))
@@ -381,10 +357,6 @@ class AdaptiveFeedback(FeedbackLaw):
         self._started = False
         self.rejected_updates = 0
         self.projected_updates = 0
-        self.prior_controls = 0
-        # Eq. 33's Ĝ for this sample's control while the identified one fails the test.
-        self._g_control: np.ndarray | None = None
-        self._g_failed = 0
         self.skipped_updates = 0
         self.stuck_updates = 0
         self._speed_prev = np.zeros(n)
@@ -464,15 +436,6 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.rejected_updates += 1
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
-        self._g_control = None
-        if self.config.g_prior_margin > 0.0:
-            self._g_failed = 0 if self._g_plausible(q_d) else self._g_failed + 1
-            if self._g_failed >= G_FAILED_SAMPLES:
-                _, g_prior = initial_model(
-                    self.model, q_d, qd_d, u_n, self.config.period, self.config.initial_model
-                )
-                self._g_control = g_prior / self.config.input_periods
-                self.prior_controls += 1
         if self._memory:
             if not self._u_n_known:  # the arm held the nominal torque before the first sample
                 self._command_prev = u_n.copy()
@@ -490,19 +453,6 @@ class AdaptiveFeedback(FeedbackLaw):
         self._k_prev = k
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
 
-    def _g_plausible(self, q_d: np.ndarray) -> bool:
-        """Every eigenvalue of ``Ĝ_v D(q_d) / T`` has a real part of at least
-        ``g_prior_margin / input_periods`` (an arm's is ``≈ I / input_periods``; the product
-        of two symmetric positive definite matrices has positive eigenvalues, whatever the
-        controller model's inertia error)."""
-        n, config = self.n_joints, self.config
-        inertia = pin.crba(self.model, self._data, q_d)
-        inertia = np.triu(inertia) + np.triu(inertia, 1).T  # CRBA fills the upper triangle
-        # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
-        g_v = self.rls.model_view()[n : 2 * n, 2 * n : 3 * n]
-        least = config.g_prior_margin * config.period / config.input_periods
-        return bool((np.linalg.eigvals(g_v @ inertia).real >= least).all())
-
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
 
@@ -519,20 +469,14 @@ class AdaptiveFeedback(FeedbackLaw):
     def _control(self, dx: np.ndarray) -> np.ndarray:
         """Optimal control of the identified model (Eq. 35, or its extensions)."""
         config = self.config
-        n = self.n_joints
         if config.q_integral == 0.0 and config.horizon == 1:
-            model_t = self.rls.model_view()
-            if self._g_control is not None:
-                model_t = model_t.copy()
-                model_t[:, 2 * n : 3 * n] = self._g_control
-            return self._one_step(model_t, dx)
-        F, w = self.rls.F, self.rls.w
-        G = self.rls.G if self._g_control is None else self._g_control
+            return self._one_step(self.rls.model_view(), dx)
+        F, G, w = self.rls.F, self.rls.G, self.rls.w
         if config.q_integral == 0.0:
             return receding_horizon_control(
                 F, G, w, self.Q, self.R, dx, config.horizon, check_weights=False
             )
-        T = config.period
+        n, T = self.n_joints, config.period
         limit = config.integral_limit
         self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
         # ξ(k+1) = ξ(k) + T δq(k+1), with δq(k+1) from the identified model's position rows.
@@ -579,8 +523,7 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         config, n, T = self.config, self.n_joints, self.config.period
         d, periods = config.command_delay, config.input_periods
-        F0, w0 = self.rls.F, self.rls.w
-        G0 = self.rls.G if self._g_control is None else self._g_control
+        F0, G0, w0 = self.rls.F, self.rls.G, self.rls.w
         # a(k) = τ_c(k-1) - u_n(k): the command already on its way (delay 1).
         memory = ([self._command_prev - u_n] if d else []) + ([self._a_last] if periods > 1 else [])
         L, p = len(memory), 2 * n

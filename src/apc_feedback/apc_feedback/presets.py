@@ -54,7 +54,6 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "q_integral": 1e6,
         "integral_limit": 0.05,
         "project_g": True,
-        "g_prior_margin": 0.02,
     }
 
 
