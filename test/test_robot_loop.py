@@ -13,7 +13,7 @@ from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
 from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
-from apc_feedback.robot_loop import CommandMap, RobotLoop
+from apc_feedback.robot_loop import START_RESEND_SAMPLES, CommandMap, RobotLoop
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour, Quintic
@@ -80,6 +80,27 @@ def test_activation_is_a_start_and_the_law_runs_when_its_setpoint_arrives():
     step = loop.tick(t + T)
     assert not step.start and step.sample.stamp_ns == 101 * T
     assert step.command == pytest.approx([1.0 + 10.0, 1.0 + 10.0])  # kp * 0.1
+
+
+def test_a_start_without_an_answer_is_sent_again_from_the_sample_then():
+    # The first start can be lost (published before the feedforward matched): without a
+    # resend the loop would wait for its set point for ever and never command.
+    loop, counts, _ = _loop()
+    t = 100 * T
+    loop.on_joint_state(_state(t, 0.3), t)
+    loop.activate(t)
+    assert loop.tick(t).start
+    for i in range(1, START_RESEND_SAMPLES):
+        loop.on_joint_state(_state(t + i * T, 0.3), t + i * T)
+        step = loop.tick(t + i * T)
+        assert not step.start and step.command is None
+    k = 100 + START_RESEND_SAMPLES
+    loop.on_joint_state(_state(k * T, 0.4), k * T)
+    step = loop.tick(k * T)
+    assert step.start and step.sample.stamp_ns == k * T and counts["start_resends"] == 1
+    # an answer to the first start arriving now is from a superseded start
+    assert loop.on_setpoint(_setpoint(100, 0.3), start=True).command is None
+    assert loop.on_setpoint(_setpoint(k, 0.4, u_n=2.0), start=True).command.tolist() == [2.0, 2.0]
 
 
 def test_a_tick_without_a_new_state_takes_no_sample_and_the_law_skips_across_the_gap():

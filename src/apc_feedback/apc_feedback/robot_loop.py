@@ -60,6 +60,11 @@ from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.controller import FeedbackLaw
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
 
+#: Samples a start waits for the set point that answers it before it is sent again: a start
+#: published before the feedforward's subscription matched (DDS discovery) is lost, and without
+#: a resend the loop would never command.
+START_RESEND_SAMPLES = 10
+
 
 class CommandMap:
     """Model-order torques -> one ``Float64MultiArray`` row in ``command_joints`` order, clipped.
@@ -226,6 +231,13 @@ class RobotLoop:
             self.count("watchdog_recovered")
             self.log("warn", f"sample {take.k}: joint states back; holding the measured position")
         if self._restart:
+            return self._start(take.sample)
+        waiting = self._start_stamp is not None
+        if (
+            waiting
+            and take.sample.stamp_ns - self._start_stamp >= START_RESEND_SAMPLES * self.period_ns
+        ):
+            self.count("start_resends")
             return self._start(take.sample)
         self._pending = take.sample
         step = self._try()
