@@ -13,7 +13,6 @@ the law's precision runs in simulated time (see :data:`TIME_SCALE`).
 from __future__ import annotations
 
 import contextlib
-import signal
 import subprocess
 import sys
 import time
@@ -37,6 +36,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
 from apc_core.robot import Payload, load_robot, with_payload
+from apc_plant_sim.experiment import stop_processes
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.scenario import CONFIG_DIR
 
@@ -203,13 +203,7 @@ def _controllers(tmp_path: Path, **robot_node: object):
     try:
         yield log_path
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes([proc], timeout_s=10.0)
     assert proc.returncode == 0, log_path.read_text()[-3000:]
 
 

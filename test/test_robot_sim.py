@@ -8,7 +8,6 @@ effort ``forward_command_controller`` takes them.
 from __future__ import annotations
 
 import contextlib
-import signal
 import subprocess
 import sys
 import time
@@ -27,6 +26,7 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
+from apc_plant_sim.experiment import stop_processes
 from apc_plant_sim.scenario import CONFIG_DIR
 
 STATE_JOINTS = ["joint_2", "finger_joint", "joint_3", "joint_1"]
@@ -318,11 +318,5 @@ def _process(argv: list[str], err_path: Path) -> Iterator[subprocess.Popen]:
     try:
         yield proc
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes([proc], timeout_s=10.0)
         err.close()
