@@ -1122,16 +1122,19 @@ def test_long_run_stays_bounded():
         worst = max(max(r["max_error_deg"]["move"]), max(r["max_error_deg"]["hold"]))
         assert worst <= bound, (name, r["max_error_deg"])
 
-    # The printed RLS on the same schedule: refused updates, then the arm is lost.
+    # The printed RLS on the same schedule: P winds up and loses definiteness, so updates are
+    # refused. Whether the arm is then lost within these 150 s depends on rounding, which
+    # differs between x86-64 machines running the same wheels (lost on one, a 1.1 deg worst
+    # hold on another), so only the wind-up is asserted; the error is reported.
     r = lr.run_long(lr.CONFIGS["paper_qpos"], seconds, segment_s=60.0)
     report(
         "long run paper_qpos (no guard)",
         diverged_at_s=r["diverged_at_s"],
         rejected=r["rejected_updates"],
         max_trace_p=r["max_trace_p"],
+        max_error_deg=r["max_error_deg"],
     )
     assert r["rejected_updates"] > 0 and r["max_trace_p"] > 1e12
-    assert r["diverged_at_s"] is not None or max(r["max_error_deg"]["hold"]) > 100.0
 
     # One move and a 20 s hold without payload (no excitation), with and without the guard.
     hold = lr.Schedule(poses_deg=lr.POSES_DEG[:2], holds_s=(20.0,), payloads_kg=(0.0,))
