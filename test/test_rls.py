@@ -173,8 +173,9 @@ def test_printed_update_equals_unforgetting_batch_least_squares() -> None:
         RlsConfig(rho=0.95, alpha=50.0),
         RlsConfig(rho=0.8, alpha=50.0, forgetting="printed"),
         RlsConfig(rho=0.9, alpha=50.0, trace_max=20.0),
+        RlsConfig(rho=0.9, alpha=50.0, trace_max=50.0, alpha_model=0.5),
     ],
-    ids=["exponential", "printed", "guarded"],
+    ids=["exponential", "printed", "guarded", "model prior"],
 )
 def test_fast_update_equals_the_paper_written_reference(config: RlsConfig) -> None:
     # Rls.update computes all columns in stacked buffers; rls_update_reference writes Eqs.
@@ -185,7 +186,7 @@ def test_fast_update_equals_the_paper_written_reference(config: RlsConfig) -> No
     F0, G0, w0 = random_system(rng)
     rls = Rls(N, config)
     rls.reset(F0, G0, w0)
-    theta, P = theta_of(F0, G0, w0), config.alpha * np.eye(M)
+    theta, P = theta_of(F0, G0, w0), np.diag(config.initial_p_diagonal(N))
     still = Rls.regressor(np.full(P_DIM, 0.2), np.full(N, -0.1))
     data = exciting_data(rng, F, G, w, 120)
     data[40:80] = [(still, F @ still[:P_DIM] + G @ still[P_DIM:-1] + w)] * 40
@@ -298,6 +299,46 @@ def test_trace_guard_bounds_windup(z: np.ndarray) -> None:
     # P z is scaled down with P).
     np.testing.assert_allclose(free.predict(z), x, rtol=1e-9)
     np.testing.assert_allclose(guarded.predict(z), x, rtol=1e-4)
+
+
+def test_model_prior_guard_bounds_each_block_of_p() -> None:
+    # A hold: the regressor repeats, P winds up in every unexcited direction. With a model
+    # prior each block stays within its share of trace_max, P symmetric positive definite.
+    alpha, alpha_model = 1e3, 1e-2
+    config = RlsConfig(rho=0.95, alpha=alpha, trace_max=alpha + 3 * N * alpha_model,
+                       alpha_model=alpha_model)  # fmt: skip
+    np.testing.assert_allclose(config.block_trace_max(N), [2 * N * 1e-2, N * 1e-2, alpha])
+    rls = Rls(N, config)
+    np.testing.assert_array_equal(rls.P.diagonal(), [alpha_model] * (3 * N) + [alpha])
+    still = Rls.regressor(np.full(P_DIM, 1e-3), np.full(N, 2.0))
+    steps = [rls.update(still, np.zeros(P_DIM)) for _ in range(400)]
+    assert any(s.clipped for s in steps)
+    d = rls.P.diagonal()
+    assert d[:P_DIM].sum() <= 2 * N * alpha_model * (1 + 1e-12)
+    assert d[P_DIM:-1].sum() <= N * alpha_model * (1 + 1e-12)
+    assert d[-1] <= alpha * (1 + 1e-12)
+    P = rls.P
+    assert np.array_equal(P, P.T)
+    np.linalg.cholesky(P)
+
+
+def test_model_prior_keeps_g_through_a_sample_that_does_not_follow_the_model() -> None:
+    # The estimate sits at the true (F, G, w); one sample arrives whose input was applied for
+    # part of the period only (a command applied late), dx = F x + 0.6 G u + w. Without a prior
+    # on the model that one sample moves Ĝ by a large fraction; with it Ĝ barely moves and ŵ
+    # takes the residual.
+    rng = np.random.default_rng(21)
+    F, G, w = random_system(rng)
+    z = Rls.regressor(1e-3 * rng.standard_normal(P_DIM), np.array([3.0, -2.0, 1.5]))
+    late = F @ z[:P_DIM] + 0.6 * G @ z[P_DIM:-1] + w
+    moved = {}
+    for name, alpha_model in (("flat", None), ("prior", 1e-4)):
+        rls = Rls(N, RlsConfig(alpha=1.5e5, alpha_model=alpha_model))
+        rls.reset(F, G, w)
+        rls.update(z, late)
+        moved[name] = rel_err(rls.G, G)
+    assert moved["flat"] > 0.1
+    assert moved["prior"] < 1e-3
 
 
 def test_trace_guard_keeps_identification_working() -> None:

@@ -129,9 +129,17 @@ class AdaptiveConfig:
     rho, alpha, forgetting :
         RLS settings (:class:`apc_feedback.rls.RlsConfig`); paper: rho = 0.95,
         alpha = 1500 (P1) or 150000 (P2).
+    alpha_model : float
+        ``P(0)`` of the regressor rows that carry ``δx`` and ``δu``, the prior on ``F̂(0),
+        Ĝ(0)`` of Eq. 33 (``P(0) = diag(alpha_model I_3n, alpha)``; ``alpha`` then applies
+        to ``ŵ`` alone). 0 (default): ``alpha`` everywhere, Eq. 32. With the paper's large
+        ``alpha`` the first samples of a hold decide ``F̂`` and ``Ĝ`` alone, and one that
+        does not follow Eq. 16 (a command applied a few ms late) makes ``Ĝ``'s velocity block
+        indefinite within two samples (``apc_feedback.rls`` says more).
     trace_max : float
         Wind-up guard, an upper bound on ``trace(P)``. ``0`` (default) means
-        ``trace(P(0)) = alpha (3n+1)``: never less certain than at the start. A negative value
+        ``trace(P(0))``: never less certain than at the start (with ``alpha_model``, each
+        block of ``P`` within its own trace at ``P(0)``). A negative value
         disables the guard (the paper's RLS). Measured in ``bench/trace_guard.py``: without it
         a 20 s hold winds ``trace(P)`` up to 1e20-1e45, the identifier's updates become
         unusable (P loses definiteness) and with a position-weighted Q the arm diverges; with
@@ -201,6 +209,12 @@ class AdaptiveConfig:
     )
     rho: float = setting(0.95, "RLS forgetting factor rho, Eqs. 29-31; 0 < rho <= 1", 1e-6, 1.0)
     alpha: float = setting(1.5e5, "P(0) = alpha I, Eq. 32", 1e-12, 1e15)
+    alpha_model: float = setting(
+        0.0,
+        "P(0) of the F and G rows (the prior on Eq. 33's model); 0 = alpha (Eq. 32)",
+        0.0,
+        1e15,
+    )
     forgetting: Literal["exponential", "printed"] = setting(
         "exponential",
         "Eq. 30: 'exponential' (P divided by rho) or 'printed' (as printed, never forgets)",
@@ -269,14 +283,23 @@ class AdaptiveConfig:
 
     def rls_config(self, n_joints: int = 1) -> RlsConfig:
         """The identifier's settings for an arm of ``n_joints`` (resolves ``trace_max``)."""
+        alpha_model = self.alpha_model if self.alpha_model > 0.0 else None
         if self.trace_max < 0.0:
             trace_max = None
         elif self.trace_max == 0.0:
-            trace_max = self.alpha * (3 * n_joints + 1)
+            m = 3 * n_joints  # trace(P(0))
+            if alpha_model is None:
+                trace_max = self.alpha * (m + 1)
+            else:
+                trace_max = self.alpha + m * alpha_model
         else:
             trace_max = self.trace_max
         return RlsConfig(
-            rho=self.rho, alpha=self.alpha, forgetting=self.forgetting, trace_max=trace_max
+            rho=self.rho,
+            alpha=self.alpha,
+            forgetting=self.forgetting,
+            trace_max=trace_max,
+            alpha_model=alpha_model,
         )
 
     @staticmethod

@@ -37,6 +37,19 @@ B. Wittenmark, *Adaptive Control*, 2nd ed., Addison-Wesley 1995, ch. 11 on estim
 Scaling keeps ``P`` symmetric positive definite and leaves the direction of the gain ``P z``
 unchanged; only its size shrinks.
 
+A prior on the model. ``P(0) = α I`` says as little about ``F`` and ``G`` as about ``w``. With a
+large α the first samples decide ``F̂`` and ``Ĝ`` almost alone, whatever Eq. 33 gave: on an arm
+that holds still (activation on a robot, every hold between moves) those samples excite almost
+nothing, and one that does not follow Eq. 16 (a command applied a few ms late) turns ``Ĝ``'s
+velocity block indefinite within two steps, after which Eq. 35 drives the arm to its limits.
+``RlsConfig.alpha_model`` gives the rows of ``z`` that carry ``δx`` and ``δu`` their own, small
+``P(0)`` (``diag(alpha_model I_3n, alpha)``): the model moves only on samples whose inputs are
+large on that scale, ``ŵ`` still follows every sample. The guard then bounds the trace of each
+block of ``P`` (the ``δx``, ``δu`` and constant rows) by its share of ``trace_max`` at ``P(0)``,
+by a congruence ``S P S`` with ``S`` constant on each block (still symmetric positive definite):
+one bound on the sum would let the model blocks wind up to the bias block's scale within a few
+seconds of a hold, and the prior would be gone.
+
 No ROS here: numpy in, dataclasses out.
 """
 
@@ -85,8 +98,13 @@ class RlsConfig:
         weighted RLS; ``"printed"`` is Eq. 30 as printed, which never forgets.
     trace_max : float or None
         Upper bound on ``trace(P)`` (the wind-up guard, see the module docstring); ``None``
-        disables it. Must be ``> 0``. A bound below ``alpha * (3n+1) = trace(P(0))`` is allowed
-        and makes the guard act from the first update.
+        disables it. Must be ``> 0``. A bound below ``trace(P(0))`` is allowed and makes the
+        guard act from the first update. With ``alpha_model`` it is shared among the three
+        blocks of ``P`` in their proportions at ``P(0)``.
+    alpha_model : float or None
+        ``P(0)`` of the ``δx`` and ``δu`` rows of ``z`` (the prior on ``F̂(0), Ĝ(0)``, see the
+        module docstring): ``P(0) = diag(alpha_model I_3n, alpha)``. ``None`` (default):
+        ``alpha`` for every row, Eq. 32.
 
     Raises
     ------
@@ -98,6 +116,22 @@ class RlsConfig:
     alpha: float = 1.5e5
     forgetting: Forgetting = "exponential"
     trace_max: float | None = None
+    alpha_model: float | None = None
+
+    def initial_p_diagonal(self, n_joints: int) -> np.ndarray:
+        """The diagonal of ``P(0)`` for an arm of ``n_joints``, shape (3n+1,)."""
+        model = self.alpha if self.alpha_model is None else self.alpha_model
+        return np.concatenate([np.full(3 * n_joints, model), [self.alpha]])
+
+    def block_trace_max(self, n_joints: int) -> np.ndarray | None:
+        """Per block of ``P`` (``δx``, ``δu``, constant rows), the bound on its trace; None when
+        one bound on ``trace(P)`` is the guard (no ``alpha_model``) or there is no guard."""
+        if self.trace_max is None or self.alpha_model is None:
+            return None
+        diagonal = self.initial_p_diagonal(n_joints)
+        n = n_joints
+        blocks = np.array([diagonal[: 2 * n].sum(), diagonal[2 * n : 3 * n].sum(), diagonal[-1]])
+        return blocks * (self.trace_max / diagonal.sum())
 
     def __post_init__(self) -> None:
         rho = _real("rho", self.rho)
@@ -115,7 +149,13 @@ class RlsConfig:
             trace_max = _real("trace_max", trace_max)
             if not trace_max > 0.0:
                 raise RlsError(f"trace_max must be > 0 or None, got {self.trace_max!r}")
+        alpha_model = self.alpha_model
+        if alpha_model is not None:
+            alpha_model = _real("alpha_model", alpha_model)
+            if not alpha_model > 0.0:
+                raise RlsError(f"alpha_model must be > 0 or None, got {self.alpha_model!r}")
         # Normalise numpy / int scalars to float so equality and hashing behave.
+        object.__setattr__(self, "alpha_model", alpha_model)
         object.__setattr__(self, "rho", rho)
         object.__setattr__(self, "alpha", alpha)
         object.__setattr__(self, "trace_max", trace_max)
@@ -127,8 +167,8 @@ class RlsConfig:
         Parameters
         ----------
         d : Mapping[str, Any]
-            Any subset of ``rho``, ``alpha``, ``forgetting``, ``trace_max``; missing keys take
-            the defaults.
+            Any subset of ``rho``, ``alpha``, ``forgetting``, ``trace_max``, ``alpha_model``;
+            missing keys take the defaults.
 
         Returns
         -------
@@ -142,7 +182,7 @@ class RlsConfig:
         """
         if not isinstance(d, Mapping):
             raise RlsError(f"RLS configuration must be a mapping, got {type(d).__name__}")
-        known = ("rho", "alpha", "forgetting", "trace_max")
+        known = ("rho", "alpha", "forgetting", "trace_max", "alpha_model")
         unknown = sorted(str(k) for k in d if k not in known)
         if unknown:
             raise RlsError(
@@ -222,7 +262,12 @@ class Rls:
         self._k = 0
         self._can_undo = False
         self._theta0 = np.zeros((m, p))
-        self._P0 = config.alpha * np.eye(m)
+        self._P0 = np.diag(config.initial_p_diagonal(self._n))
+        # Block guard (alpha_model): the bound of each block's trace, each row's block, and a
+        # buffer for the congruence's scale (see the module docstring).
+        self._block_max = config.block_trace_max(self._n)
+        self._block_of_row = np.repeat([0, 1, 2], [p, self._n, 1])
+        self._block_scale = np.empty((m, m))
         self._restore()
 
     # ------------------------------------------------------------------ read-only accessors
@@ -315,7 +360,8 @@ class Rls:
         w0 : array_like, shape (2n,), optional
             ŵ(0); default 0.
         P0 : array_like, shape (3n+1, 3n+1), optional
-            P(0), symmetric positive definite; default ``alpha I`` (Eq. 32). Symmetric to
+            P(0), symmetric positive definite; default the config's (``alpha I``, Eq. 32, or
+            with ``alpha_model`` its block diagonal). Symmetric to
             rounding is accepted and stored exactly symmetrised.
 
         Raises
@@ -334,7 +380,7 @@ class Rls:
         G0a = _matrix("G0", G0, (p, n))
         w0a = np.zeros(p) if w0 is None else _matrix("w0", w0, (p,))
         if P0 is None:
-            P0a = self._config.alpha * np.eye(m)
+            P0a = np.diag(self._config.initial_p_diagonal(n))
         else:
             P0a = _matrix("P0", P0, (m, m))
             scale = max(1.0, float(np.max(np.abs(P0a))))
@@ -451,12 +497,17 @@ class Rls:
         scale = 1.0 / rho if self._exponential else 1.0  # the 1/ρ of Eq. 30 corrected
         clipped = False
         trace_max = self._config.trace_max
-        if trace_max is not None and trace_p * scale > trace_max:
-            scale = trace_max / trace_p  # wind-up guard: trace(P(k+1)) = trace_max
-            clipped = True
-        if scale != 1.0:
-            new.P *= scale  # P(k+1): forgetting and the guard as one scaling
-            trace_p *= scale  # trace(s P) = s trace(P), to rounding
+        if self._block_max is not None:
+            if scale != 1.0:
+                new.P *= scale  # Eq. 30's 1/ρ
+            trace_p, clipped = self._guard_blocks(new)
+        else:
+            if trace_max is not None and trace_p * scale > trace_max:
+                scale = trace_max / trace_p  # wind-up guard: trace(P(k+1)) = trace_max
+                clipped = True
+            if scale != 1.0:
+                new.P *= scale  # P(k+1): forgetting and the guard as one scaling
+                trace_p *= scale  # trace(s P) = s trace(P), to rounding
         # One reduction: a non-finite entry anywhere makes the sum non-finite.
         if not (math.isfinite(float(_sum(stacked, None))) and _min(new.diagonal) > 0.0):
             _name_non_finite(z, dx_next)
@@ -464,6 +515,20 @@ class Rls:
                 raise RlsError("update rejected: residual is not finite")
             raise RlsError("update rejected: Θ or P would become non-finite or P indefinite")
         return gamma, trace_p, clipped
+
+    def _guard_blocks(self, views: _BufferViews) -> tuple[float, bool]:
+        """The guard with a model prior: ``P ← S P S``, ``S`` = ``sqrt(bound / trace)`` on each
+        block over its bound, 1 elsewhere; returns trace(P) and whether it acted."""
+        n, p = self._n, self._p
+        diagonal = views.diagonal
+        traces = np.array([_sum(diagonal[:p]), _sum(diagonal[p : p + n]), diagonal[-1]])
+        over = traces > self._block_max
+        if not over.any():
+            return float(_sum(traces)), False
+        s = np.sqrt(np.where(over, self._block_max / traces, 1.0))[self._block_of_row]
+        np.multiply.outer(s, s, out=self._block_scale)  # exactly symmetric, as P is
+        views.P *= self._block_scale
+        return float(_sum(diagonal)), True
 
     # ------------------------------------------------------------------ helpers
     def predict(self, z: np.ndarray) -> np.ndarray:
@@ -557,9 +622,21 @@ def rls_update_reference(
     P_next = P - gamma * P @ np.outer(z, z) @ P  # Eq. 30 as printed
     if config.forgetting == "exponential":
         P_next = P_next / config.rho  # Eq. 30 corrected
-    clipped = config.trace_max is not None and np.trace(P_next) > config.trace_max
-    if clipped:
-        P_next = P_next * (config.trace_max / np.trace(P_next))  # wind-up guard
+    n = theta.shape[1] // 2
+    block_max = config.block_trace_max(n)
+    if block_max is None:
+        clipped = config.trace_max is not None and np.trace(P_next) > config.trace_max
+        if clipped:
+            P_next = P_next * (config.trace_max / np.trace(P_next))  # wind-up guard
+    else:  # each block of P (δx, δu and constant rows) within its bound, by S P S
+        blocks = (slice(0, 2 * n), slice(2 * n, 3 * n), slice(3 * n, 3 * n + 1))
+        scale = np.ones(3 * n + 1)
+        for block, bound in zip(blocks, block_max, strict=True):
+            trace = np.trace(P_next[block, block])
+            if trace > bound:
+                scale[block] = np.sqrt(bound / trace)
+        clipped = bool((scale < 1.0).any())
+        P_next = P_next * np.outer(scale, scale)
     return theta_next, P_next, RlsStep(residual, gamma, float(np.trace(P_next)), clipped)
 
 
