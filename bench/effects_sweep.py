@@ -8,8 +8,8 @@ count per period of noise, a one-period command delay). Laws: computed torque (E
 Kp = 100, Kv = 20), the JTC-style PID (tuned at 10 rad/s), the adaptive law with the paper's
 settings, the recommended preset, and the recommended preset with the law option that answers
 the effect (``FIXES``: the command delay in the model, the two-period input of a differenced
-velocity, no identification while a joint sticks; for "all", all three: the "physical"
-preset).
+velocity; friction, armature, quantisation and noise need none; for "all", both: the
+"physical" preset).
 
 Per effect, case and law: maximum error over the move and final error at its end, per joint
 (deg), and whether each adaptive column beats both computed torque and PID on every joint in
@@ -49,7 +49,6 @@ BASELINES = ("computed_torque", "pid")
 # The AdaptiveConfig options added to the recommended preset for each effect (none: nothing to
 # answer), chosen one effect at a time; "all" combines them.
 FIXES = {
-    "friction": {"identify_min_speed": 0.05},
     "velocity_difference": {"input_periods": 2},
     "delay": {"command_delay": 1},
     "all": {k: v for k, v in physical_settings().items() if k not in recommended_settings()},
@@ -115,7 +114,32 @@ def main() -> None:
                 for law in LAWS
             ]
             print(f"| {effect} | {case} | {' | '.join(cells)} |")
+    print()
+    print(summary(results["effects"]))
     print(f"wrote {args.out} in {results['wall_s']} s")
+
+
+def summary(effects: dict) -> str:
+    """Per effect: each law's worst joint over the cases (max / final, deg) and the cases
+    in which each adaptive column beats both baselines (README's table)."""
+    lines = [
+        f"| effect | {' | '.join(LAWS)} | wins recommended · fixed |",
+        "|---|" + "---|" * (len(LAWS) + 1),
+    ]
+    for effect, cases in effects.items():
+        cells = []
+        for law in LAWS:
+            worst_max = max(max(row[law]["max_deg"]) for row in cases.values())
+            worst_final = max(max(row[law]["final_deg"]) for row in cases.values())
+            cells.append(f"{worst_max:.2f} / {worst_final:.2f}")
+        wins = [
+            sum(row[f"{law}_beats_baselines"] for row in cases.values())
+            for law in ("adaptive_recommended", "adaptive_recommended_fixed")
+        ]
+        lines.append(
+            f"| {effect} | {' | '.join(cells)} | {wins[0]}/{len(cases)} · {wins[1]}/{len(cases)} |"
+        )
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

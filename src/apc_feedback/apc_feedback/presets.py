@@ -43,7 +43,14 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     gravity builds up as position error), a 3-step receding horizon over the identified model,
     integral action on the position error, the RLS wind-up guard, and a projection that refuses
     RLS steps making a diagonal entry of Ĝ's velocity block (≈ T D⁻¹) non-positive (a payload
-    picked up mid-motion otherwise flips Ĝ and the law saturates).
+    picked up mid-motion otherwise flips Ĝ and the law saturates). ``alpha`` is ``P(0)`` of ŵ
+    alone: F̂ and Ĝ start from Eq. 33 with ``P(0) = 1e-3`` (``alpha_model``), so a sample
+    moves them as far as ``alpha_model |δu|²`` against 1 allows (inputs of ~30 N m, a move or a
+    payload, count; a hold's little). With ``alpha`` everywhere one command applied 4 ms late
+    on a hold lets the arm diverge, and robot mode starts every activation with a hold.
+    Chosen by measurement (README "The recommended preset's prior"): 1e-4 is as robust but
+    tracks the Panda 2-3x worse, 1e-2 tracks best and diverges when ten commands in a row
+    come 6 ms late.
     """
     return {
         **paper_settings(alpha),
@@ -54,24 +61,26 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "q_integral": 1e6,
         "integral_limit": 0.05,
         "project_g": True,
+        "alpha_model": 1e-3,
     }
 
 
 def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """The recommended preset for an arm behind a drive: a command applied one period late, the
-    velocity differenced from encoder positions, joint friction (``bench/effects_sweep.py``).
+    """The recommended preset for an arm behind a drive: a command applied one period late and
+    the velocity differenced from encoder positions (``bench/effects_sweep.py``).
 
     The identified model carries the delay (``command_delay``) and the two-period input of a
-    differenced velocity (``input_periods``), and no identification step is taken while a joint
-    sticks (``identify_min_speed``). Measured on the 3-joint PUMA 560 with all of
-    ``apc_plant_sim.effects.puma560_effects`` on, it beats computed torque and PID on every
-    joint of cases (a)-(c) and the pickup; it is not robust to other combinations (README).
+    differenced velocity (``input_periods``). Measured on the 3-joint PUMA 560 with all of
+    ``apc_plant_sim.effects.puma560_effects`` on (friction, armature, quantisation, the
+    differenced velocity, the delay), it beats computed torque and PID on every joint of cases
+    (a)-(c) and the pickup; friction needs no option of its own once the model has its prior
+    (``alpha_model``), and skipping identification while a joint sticks
+    (``identify_min_speed``) only makes it worse there.
     """
     return {
         **recommended_settings(alpha),
         "command_delay": 1,
         "input_periods": 2,
-        "identify_min_speed": 0.05,
     }
 
 
