@@ -1,0 +1,187 @@
+"""Robot mode's loop closed offline: a driver on its own clock, the controllers on theirs, no ROS.
+
+What :mod:`apc_plant_sim.offline` is for the lockstep wire, this is for robot mode: apc's plant
+stepped by a driver every ``driver_ms`` (it reports positions only, stamped with its time),
+:class:`apc_feedback.robot_loop.RobotLoop` ticking every T with a phase, and a feedforward
+answering each sample with set points up to ``k + 1`` (lookahead 1), all on one synthetic
+clock. A command reaches the driver at its first cycle at or after the tick, plus a latency
+that :class:`Latency` chooses per command: the delay a drive or a network adds, on time or
+late. The 3-joint PUMA 560 with 10 % inertia error in the controllers and a payload they do not
+know. Used by ``test/test_robot_loop.py`` and ``bench/late_commands.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
+from apc_core.wire import JointSample, SetpointStamped
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+from apc_feedback.presets import recommended_settings
+from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
+from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedforward.nominal import Feedforward
+from apc_feedforward.trajectory import FourThreeFour, Quintic
+from apc_plant_sim.plant import Plant, PlantConfig, PlantError
+from apc_plant_sim.scenario import CONFIG_DIR
+
+MS = 1_000_000  # ns
+T_NS = 10 * MS  # the preset's period
+Q0_DEG = (0.0, -45.0, -45.0)
+
+
+@dataclass
+class Latency:
+    """How late each command reaches the driver beyond its next cycle (ms).
+
+    ``fixed_ms`` for every command; ``late_ms`` more for the first ``first`` commands, and for
+    each later one with probability ``probability`` (``seed`` fixes the draws).
+    """
+
+    fixed_ms: float = 0.0
+    late_ms: float = 0.0
+    first: int = 0
+    probability: float = 0.0
+    seed: int = 0
+    _count: int = field(default=0, init=False)
+    _rng: Any = field(default=None, init=False)
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+
+    def next_ns(self) -> int:
+        """The latency of the next command (ns)."""
+        self._count += 1
+        late = self._count <= self.first or (
+            self.probability > 0.0 and self._rng.random() < self.probability
+        )
+        return round((self.fixed_ms + (self.late_ms if late else 0.0)) * MS)
+
+
+@dataclass
+class RobotRun:
+    """One run: the start position and, per driver cycle, (time ns, q, set point q or None)."""
+
+    q0: np.ndarray
+    log: list[tuple]
+
+    @property
+    def q(self) -> np.ndarray:
+        return np.array([entry[1] for entry in self.log])
+
+    def max_deviation_deg(self) -> float:
+        """Largest |q - q0| over the run (a hold's sag), deg."""
+        return float(np.rad2deg(np.max(np.abs(self.q - self.q0))))
+
+    def max_tracking_error_deg(self) -> float:
+        """Largest |q - q_d| at the ticks, deg."""
+        return float(max(np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in self.log if len(e) == 3))
+
+
+def run_robot_loop(
+    duration_s: float,
+    *,
+    goal_deg: Sequence[float] | None = None,
+    driver_ms: float = 2.0,
+    phase_ms: float = 0.3,
+    payload_kg: float = 2.268,
+    pause: tuple[float, float] | None = None,
+    latency: Latency | None = None,
+    settings: Mapping[str, Any] | None = None,
+) -> RobotRun:
+    """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
+
+    Parameters
+    ----------
+    duration_s : float
+        Run time after activation (s).
+    goal_deg : sequence of float, optional
+        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 20 samples after activation.
+    driver_ms, phase_ms : float
+        The driver's period and the ticks' phase after a multiple of T (ms).
+    payload_kg : float
+        The payload at the wrist centre the controllers do not know.
+    pause : (start, end), optional
+        Seconds after activation during which the driver publishes no states.
+    latency : Latency, optional
+        When commands reach the driver (default: at its next cycle).
+    settings : mapping, optional
+        The adaptive law's settings (default: the recommended preset).
+    """
+    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
+    plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
+    q0 = np.deg2rad(Q0_DEG)
+    dt = round(driver_ms * MS)
+    plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
+    data = controller.model.createData()
+    config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=0.01))
+    loop = RobotLoop(
+        law=AdaptiveFeedback(controller.model, config),
+        sampling=RobotSamplingConfig(),
+        command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
+        gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
+        path_tolerance=np.full(3, 0.2),
+    )
+    latency = latency or Latency()
+    ff: list = []  # [Feedforward, next k]
+    log: list[tuple] = []
+    pending: list[tuple[int, np.ndarray]] = []  # (when the driver applies it, torque)
+    # Before activation another controller holds the arm (the true gravity torque).
+    torque = pin.computeGeneralizedGravity(plant_robot.model, plant_robot.model.createData(), q0)
+
+    def feedforward(sample: JointSample, start: bool) -> list[Step]:
+        if start:
+            hold = Quintic(sample.position, sample.position, 0.01)
+            ff[:] = [Feedforward(controller.model, hold, 0.01, sample.stamp_ns // T_NS), None]
+            if goal_deg is not None:
+                move = FourThreeFour(sample.position, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
+                ff[0].set_trajectory(move, sample.stamp_ns // T_NS + 20)
+        k = sample.stamp_ns // T_NS
+        first = k if start else max(ff[1], k)
+        steps = []
+        for j in range(first, k + 2):
+            sp = ff[0].sample(j)
+            setpoint = SetpointStamped(j * T_NS, sp.q, sp.qd, sp.qdd, sp.u_n, 0)
+            steps.append(loop.on_setpoint(setpoint, start=start and j == k))
+        ff[1] = k + 2
+        return steps
+
+    def handle(step: Step, now: int) -> None:
+        if step.command is not None:
+            pending.append((now + latency.next_ns(), loop.command.to_model(step.command)))
+            pending.sort(key=lambda arrival: arrival[0])  # the newest arrival is applied
+        if step.sample is not None:
+            for answer in feedforward(step.sample, step.start):
+                handle(answer, now)
+
+    t_act = 5000 * T_NS + round(phase_ms * MS)
+    t_driver, t_tick = 5000 * T_NS - 40 * MS, t_act
+    end = t_act + round(duration_s * 1e9)
+    activated = False
+    while min(t_driver, t_tick) < end:
+        if t_driver <= t_tick:
+            while pending and pending[0][0] <= t_driver:
+                torque = pending.pop(0)[1]
+            if not (pause and pause[0] <= (t_driver - t_act) * 1e-9 < pause[1]):
+                loop.on_joint_state(JointSample(t_driver, plant.q.copy(), None, None), t_driver)
+            log.append((t_driver, plant.q.copy()))
+            try:
+                plant.step(torque)
+            except PlantError:  # the arm is lost: the run ends here
+                break
+            t_driver += dt
+        else:
+            if not activated:
+                loop.activate(t_tick)
+                activated = True
+            handle(loop.tick(t_tick), t_tick)
+            if ff:
+                log[-1] = (*log[-1][:2], ff[0].sample(t_tick // T_NS).q)
+            t_tick += T_NS
+    return RobotRun(q0, log)
