@@ -54,6 +54,10 @@ SUBSTEP = 0.0005
 #: controllers, not about the machine.
 TIME_SCALE = 0.2
 T_NS = 10_000_000  # the preset's period
+#: Real seconds the simulated-time driver waits at a tick for its sample and command.
+TICK_WAIT_S = 0.5
+#: Real seconds per step before the controllers' first sample (their clock reaches a tick).
+IDLE_STEP_S = 0.1
 
 
 class Driver(Node):
@@ -61,10 +65,12 @@ class Driver(Node):
 
     With ``time_scale`` it runs in simulated time instead, publishing ``/clock`` (what
     Gazebo or MuJoCo behind ros2_control do with ``use_sim_time``) at ``time_scale`` times
-    real time, and at each of robot_node's ticks it waits (up to 0.2 s) for the sample and
-    its command before simulating on: on a loaded machine a stalled process would otherwise
-    delay the torque by more than the law tolerates. The ticks' clock is learned from the
-    samples (their stamp kT and the clock at which they arrive).
+    real time, and at each of robot_node's ticks it waits (up to :data:`TICK_WAIT_S`) for the
+    sample and its command before simulating on: on a loaded machine a stalled process would
+    otherwise delay the torque. The ticks' clock is learned from the samples (their stamp kT
+    and the clock at which they arrive); until the first one, time moves one step per
+    :data:`IDLE_STEP_S`, so the first sample finds the driver still at its tick and its
+    command is waited for too.
     """
 
     def __init__(self, context, rate_hz: float = 500.0, time_scale: float | None = None) -> None:
@@ -77,7 +83,7 @@ class Driver(Node):
         self.plant = Plant(
             true_robot, PlantConfig(period=SUBSTEP, step=SUBSTEP), np.deg2rad(Q0_DEG)
         )
-        self._t = time.monotonic()
+        self._t = self._stepped = time.monotonic()
         self.time_scale = time_scale
         self.sim_ns = 1_000 * wire.NS_PER_S  # sim time starts at 1000 s
         self.clock_pub = self.create_publisher(Clock, wire.CLOCK, wire.CLOCK_QOS)
@@ -106,6 +112,8 @@ class Driver(Node):
     def _on_sample(self, msg: JointState) -> None:
         stamp = wire.stamp_to_ns(msg.header.stamp)
         offset = self.sim_ns - stamp  # the smallest one seen is a sample that came at once
+        if self.tick_offset is None:  # the driver idled at this tick: wait for its command
+            self._wait = [stamp, time.monotonic(), True, False]
         if self.tick_offset is None or msg.header.frame_id == wire.START_FRAME:
             self.tick_offset = offset  # a (re)activation starts ticks of another phase
         self.tick_offset = min(self.tick_offset, offset)
@@ -130,9 +138,12 @@ class Driver(Node):
             self._t += steps * SUBSTEP
         else:  # one period of simulated time per call
             if self._wait is not None:
-                if now - self._wait[1] < 0.2:
+                if now - self._wait[1] < TICK_WAIT_S:
                     return
                 self._wait, self._waits = None, False
+            if self.tick_offset is None and now - self._stepped < IDLE_STEP_S:
+                return
+            self._stepped = now
             steps = round(self.dt / SUBSTEP)
             self.sim_ns += round(self.dt * wire.NS_PER_S)
             self.clock_pub.publish(Clock(clock=wire.ns_to_stamp(self.sim_ns)))
