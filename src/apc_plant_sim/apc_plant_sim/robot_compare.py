@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from builtin_interfaces.msg import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -49,6 +50,7 @@ from apc_core import wire
 from apc_core.nodeutil import StopSignals, destroy_nodes, make_executor
 from apc_core.params import ConfigError
 from apc_core.robot import example_robot_urdf
+from apc_feedback.presets import DEFAULT_PRESET, PRESETS
 from apc_plant_sim.effects import panda_effects, puma560_effects, single_effect
 from apc_plant_sim.experiment import (
     Progress,
@@ -58,6 +60,7 @@ from apc_plant_sim.experiment import (
     wait_for,
 )
 from apc_plant_sim.scenario import (
+    CONFIG_DIR,
     PAPER_CASES,
     Scenario,
     paper_scenario,
@@ -104,6 +107,26 @@ LAWS: dict[str, tuple[str, dict[str, Any] | None]] = {
 BASELINES = ("computed torque", "PID")
 #: The preset for an arm behind a drive, run on the physical arm only.
 PHYSICAL_LAW = "adaptive physical"
+#: The robot-mode parameter file apc ships for each arm (in ``config/``).
+ROBOT_FILES = {"puma3": "puma560_3dof_robot.yaml", "panda": "panda_robot.yaml"}
+#: The law of the arm's robot file, run where it differs from the recommended preset.
+ROBOT_FILE_LAW = "adaptive robot file"
+
+
+def robot_file_law(arm: str) -> tuple[str, dict[str, Any]]:
+    """``robot_node``'s law in the arm's shipped robot file: its controller and preset with the
+    file's ``adaptive.*`` values."""
+    params = yaml.safe_load((CONFIG_DIR / ROBOT_FILES[arm]).read_text())
+    node = params["robot_node"]["ros__parameters"]
+    settings = PRESETS[node.get("preset", DEFAULT_PRESET)]()
+    family = "adaptive."
+    settings.update({k[len(family) :]: v for k, v in node.items() if k.startswith(family)})
+    return node.get("controller", "adaptive"), settings
+
+
+def law_of(case: RobotCase) -> tuple[str, dict[str, Any] | None]:
+    """(controller, settings) of a run's law."""
+    return robot_file_law(case.arm) if case.law == ROBOT_FILE_LAW else LAWS[case.law]
 
 
 @cache
@@ -170,16 +193,23 @@ def plan(
     """Every run (``quick``: case (c) only; the ``physical`` preset only where the arm is);
     ``realtime`` adds case (c) with every effect on, each law, on the wall clock."""
     cases = ("c",) if quick else CASES
+    own_file = [arm for arm in arms if robot_file_law(arm) != LAWS["adaptive recommended"]]
     runs = [
         RobotCase(arm, case, effects, law)
         for arm in arms
         for effects in EFFECTS
         for case in cases
-        for law in LAWS
+        for law in (*LAWS, ROBOT_FILE_LAW)
         if not (effects == "ideal" and law == PHYSICAL_LAW)
+        and (law != ROBOT_FILE_LAW or arm in own_file)
     ]
     if realtime:
-        runs += [RobotCase(arm, "c", "physical", law, "realtime") for arm in arms for law in LAWS]
+        runs += [
+            RobotCase(arm, "c", "physical", law, "realtime")
+            for arm in arms
+            for law in (*LAWS, ROBOT_FILE_LAW)
+            if law != ROBOT_FILE_LAW or arm in own_file
+        ]
     return runs
 
 
@@ -213,7 +243,7 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
     if sc.lock_joints:
         shared["lock_joints"] = list(sc.lock_joints)
     inertia_error = [float(v) for v in sc.inertia_error]
-    controller, settings = LAWS[case.law]
+    controller, settings = law_of(case)
     period = float(sc.period)
     feedforward = {**shared, "period": period, "mode": "robot", "inertia_error": inertia_error}
     robot_node = {
@@ -260,7 +290,7 @@ def goal_message(scenario: Scenario, joint_names: Sequence[str]) -> JointTraject
 
 def describe(case: RobotCase) -> dict[str, Any]:
     """What the recording stores about its run (``custom_data['apc.run']``)."""
-    controller, settings = LAWS[case.law]
+    controller, settings = law_of(case)
     return {
         "name": case.name,
         "controller": controller,
@@ -389,6 +419,30 @@ def load(path: str | Path) -> Any:
     rows = ("t", "q", "qd", "applied", "q_d", "qd_d", "qdd_d", "u_n", "du", "trace_p")
     return replace(run, residual_norm=run.residual_norm[:end],
                    **{name: getattr(run, name)[:end] for name in rows})  # fmt: skip
+
+
+def hold_error_deg(path: str | Path) -> float:
+    """Worst |q - q_d| (deg) of a robot-mode recording over the samples before the set point
+    first moves: the sag of the hold before the goal."""
+    from apc_core.bag.reader import read_messages
+
+    samples, setpoints = {}, {}
+    for m in read_messages(path):
+        if m.topic.endswith("/" + wire.SAMPLE):
+            msg = m.decode()
+            samples[wire.stamp_to_ns(msg.header.stamp)] = msg
+        elif m.topic.endswith("/" + wire.SETPOINT):
+            msg = m.decode()
+            setpoints[wire.stamp_to_ns(msg.header.stamp)] = msg
+    names = tuple(next(iter(samples.values())).name)
+    worst = 0.0
+    for stamp in sorted(set(samples) & set(setpoints)):
+        sp = wire.msg_to_setpoint(setpoints[stamp], names)
+        if np.any(sp.qd != 0.0):
+            break
+        q = wire.joint_state_to_arrays(samples[stamp], names, require=("position",)).position
+        worst = max(worst, float(np.max(np.abs(np.rad2deg(q - sp.q)))))
+    return worst
 
 
 def measure(path: str | Path) -> dict[str, Any]:
@@ -558,8 +612,10 @@ def report_section(cases: Sequence[RobotCase], results: Mapping[str, dict]) -> s
             )
     for key in ("max_error_deg", "final_error_deg"):
         parts.append(winners(cases, results, key))
-    for law in ("adaptive recommended", "adaptive physical"):
+    for law in ("adaptive recommended", PHYSICAL_LAW, ROBOT_FILE_LAW):
         verdicts = beats_baselines(cases, results, law)
+        if not verdicts:
+            continue
         lines = [f"| run | {law} beats computed torque and PID on every joint | where not |",
                  "|---|---|---|"]  # fmt: skip
         for run, v in verdicts.items():
