@@ -404,13 +404,20 @@ def test_realtime_controller_death_watchdog_and_restart(tmp_path, observer):
 
         # -- feedforward restarted: brake released, the arm moves, diagnostics OK -------------
         t_restart = time.monotonic()
-        kids.start("feedforward_node")
-        resume_ff = obs.spin_until(
-            lambda: any(s[0] > t_restart and not _braked(s) for s in obs.states[-3:]),
-            30,
-            "the loop after the feedforward restart",
-            [kids.procs["plant_node"], kids.procs["feedback_node"]],
-        )
+        restarted = kids.start("feedforward_node")
+        try:
+            resume_ff = obs.spin_until(
+                lambda: any(s[0] > t_restart and not _braked(s) for s in obs.states[-3:]),
+                30,
+                "the loop after the feedforward restart",
+                [kids.procs["plant_node"], kids.procs["feedback_node"], restarted],
+            )
+        except AssertionError as exc:  # say what each node saw
+            tails = {k: kids.stderr(k)[-1500:] for k in ("feedforward_node", "plant_node")}
+            raise AssertionError(
+                f"{exc}; publishers of feedforward/torque: "
+                f"{obs.publishers(wire.FEEDFORWARD_TORQUE)}; {tails}"
+            ) from None
         t_back = time.monotonic()
         obs.spin_for(0.5)
         # A process just started may stall past the watchdog once while it warms up (seen
