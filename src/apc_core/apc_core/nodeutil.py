@@ -29,6 +29,7 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -335,6 +336,30 @@ def _user_args(argv: Sequence[str]) -> list[str]:
 
 #: Longest teardown of a node process before it is ended with its tracebacks (s).
 TEARDOWN_LIMIT_S = 5.0
+#: At the end of a run, how long the nodes' reliable publishers may wait for their subscribers
+#: to acknowledge what was sent (:func:`wait_for_delivery`).
+DELIVERY_LIMIT_S = 2.0
+
+
+def wait_for_delivery(nodes: Iterable[Node], timeout_s: float = DELIVERY_LIMIT_S) -> bool:
+    """Wait until every reliable publisher of ``nodes`` has its samples acknowledged by its
+    subscribers, at most ``timeout_s`` in all; whether all were.
+
+    A run that ends and destroys its writers at once can take the last samples with it: a
+    reliable reader that misses one sample holds every later one back until the repair comes,
+    and a writer that has left repairs nothing, so a recorder or an observer loses the run's
+    tail from the gap on. Best-effort publishers and publishers without subscribers return at
+    once.
+    """
+    deadline = time.monotonic() + timeout_s
+    for node in nodes:
+        for publisher in node.publishers:
+            left = deadline - time.monotonic()
+            if left <= 0.0 or not publisher.wait_for_all_acked(Duration(seconds=left)):
+                return False
+    return True
+
+
 #: Executors a node process can spin (:func:`make_executor`).
 EXECUTORS = ("events", "single")
 #: Environment variable that picks the executor of ``ros2 run`` nodes (``events`` unless set).
@@ -465,6 +490,11 @@ def run_nodes(
             if spin_until is not None and spin_until(nodes):
                 codes = [getattr(node, "exit_code", 0) for node in nodes]
                 code = next((c for c in codes if c), 0)
+                if not wait_for_delivery(nodes):
+                    nodes[0].get_logger().warning(
+                        f"not every subscriber acknowledged the run's last messages within "
+                        f"{DELIVERY_LIMIT_S} s"
+                    )
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
