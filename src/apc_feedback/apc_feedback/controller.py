@@ -287,7 +287,7 @@ class AdaptiveConfig:
         if self.trace_max < 0.0:
             trace_max = None
         elif self.trace_max == 0.0:
-            m = 3 * n_joints  # trace(P(0))
+            m = 3 * n_joints  # trace(P(0)), as a product where alpha is all of it (its rounding)
             if alpha_model is None:
                 trace_max = self.alpha * (m + 1)
             else:

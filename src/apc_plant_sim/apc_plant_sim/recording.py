@@ -165,7 +165,8 @@ def load_robot_run(path: str | Path) -> RecordedRun:
     ``applied`` is the torque of the driver's first state after the sample (the torque over the
     driver period that followed it). There is no feedback-torque topic in robot mode (the
     commanding node adds ``u_n + du`` itself): ``du`` is NaN, and so is the identification
-    telemetry.
+    telemetry. ``run["hold_max_error_deg"]`` is the worst ``|q - q_d|`` (deg) over the samples
+    before the set point first moves: the sag of the hold before the goal.
     """
     path = Path(path)
     run = _custom_run(path)
@@ -198,6 +199,9 @@ def load_robot_run(path: str | Path) -> RecordedRun:
             q_d[i], qd_d[i], qdd_d[i], u_n[i] = sp.q, sp.qd, sp.qdd, sp.u_n
     moving = np.flatnonzero(np.any(np.nan_to_num(np.abs(qd_d)) > 0.0, axis=1))
     start = max(int(moving[0]) - 1, 0) if moving.size else 0
+    still = slice(0, int(moving[0]) if moving.size else rows)
+    hold_error = np.abs(np.rad2deg(q[still] - q_d[still]))
+    hold_max = float(np.nanmax(hold_error)) if np.isfinite(hold_error).any() else 0.0
     applied = np.full((rows, n), np.nan)
     driver.sort(key=lambda item: item[0])
     driver_stamps = np.array([stamp for stamp, _ in driver], dtype=np.int64)
@@ -226,5 +230,5 @@ def load_robot_run(path: str | Path) -> RecordedRun:
         trace_p=np.full(rows - start, np.nan),
         residual_norm=np.full(rows - start, np.nan),
         theta_t=None,
-        run={**run, "move_start_s": stamps[start] / wire.NS_PER_S},
+        run={**run, "move_start_s": stamps[start] / wire.NS_PER_S, "hold_max_error_deg": hold_max},
     )

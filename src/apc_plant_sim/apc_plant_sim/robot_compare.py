@@ -424,25 +424,9 @@ def load(path: str | Path) -> Any:
 def hold_error_deg(path: str | Path) -> float:
     """Worst |q - q_d| (deg) of a robot-mode recording over the samples before the set point
     first moves: the sag of the hold before the goal."""
-    from apc_core.bag.reader import read_messages
+    from apc_plant_sim.recording import load_robot_run
 
-    samples, setpoints = {}, {}
-    for m in read_messages(path):
-        if m.topic.endswith("/" + wire.SAMPLE):
-            msg = m.decode()
-            samples[wire.stamp_to_ns(msg.header.stamp)] = msg
-        elif m.topic.endswith("/" + wire.SETPOINT):
-            msg = m.decode()
-            setpoints[wire.stamp_to_ns(msg.header.stamp)] = msg
-    names = tuple(next(iter(samples.values())).name)
-    worst = 0.0
-    for stamp in sorted(set(samples) & set(setpoints)):
-        sp = wire.msg_to_setpoint(setpoints[stamp], names)
-        if np.any(sp.qd != 0.0):
-            break
-        q = wire.joint_state_to_arrays(samples[stamp], names, require=("position",)).position
-        worst = max(worst, float(np.max(np.abs(np.rad2deg(q - sp.q)))))
-    return worst
+    return load_robot_run(path).run["hold_max_error_deg"]
 
 
 def measure(path: str | Path) -> dict[str, Any]:
