@@ -378,6 +378,7 @@ class AdaptiveFeedback(FeedbackLaw):
     def reset(self) -> None:
         n = self.n_joints
         self._started = False
+        self._prior_input_gain: np.ndarray | None = None
         self.rejected_updates = 0
         self.projected_updates = 0
         self.skipped_updates = 0
@@ -428,6 +429,7 @@ class AdaptiveFeedback(FeedbackLaw):
             )
             # Two input periods share a held input's effect: G(0) = Eq. 33's G / 2.
             self.rls.reset(F0, G0 / self.config.input_periods)
+            self._prior_input_gain = G0
             self._started = True
         elif k != self._k_prev + 1:
             skipped = True
@@ -475,6 +477,18 @@ class AdaptiveFeedback(FeedbackLaw):
         self._u_n_prev[:] = u_n
         self._k_prev = k
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
+
+    @property
+    def prior_input_gain(self) -> np.ndarray | None:
+        """Eq. 33's ``G(0)`` at the first sample since the last :meth:`reset` (the effect of a
+        perturbation held over one period), shape (2n, n); None before that sample."""
+        return self._prior_input_gain
+
+    @property
+    def identified_input_gain(self) -> np.ndarray:
+        """The identified effect of a perturbation held over one period, shape (2n, n): what
+        :attr:`prior_input_gain` started it from."""
+        return self.rls.G * self.config.input_periods
 
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
