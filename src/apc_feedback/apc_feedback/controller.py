@@ -167,21 +167,17 @@ class AdaptiveConfig:
         possible models. Without it a sudden load (a payload picked up) lets one
         large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
         torque (19 deg on joint 3 in the pickup run). Off in the paper.
-    command_delay : {0, 1}
-        Periods between the law's command and the period the arm applies it over (a drive
-        that applies the newest command at its next cycle: 1). Eq. 16 stays the identified
-        model, with ``δu(k)`` the perturbation *applied* over ``[kT, (k+1)T)``; the control
-        then plans over the state ``(δx(k), δu(k))``, where ``δu(k)`` is already decided
-        (its own last command minus ``u_n(k)``), and commands the next period's
-        ``δu(k+1)`` (converted to this sample's ``du`` with ``u_n`` extrapolated one period).
-        0 (default): the paper's law.
-    input_periods : {1, 2}
-        Periods whose input reaches the next state: 1 is Eq. 16; 2 models
-        ``δx(k+1) = F δx(k) + G (δu(k) + δu(k-1)) + w``, the structure a velocity measured as
-        the backward difference of positions over one period has (``(q(k+1) - q(k)) / T`` of
-        a double integrator carries half of each of the last two periods' inputs); the
-        regressor's input is then ``δu(k) + δu(k-1)`` and the control plans over
-        ``(δx(k), δu(k-1))``. 1 (default): the paper's law.
+    input_lags : {0, 1, 2}
+        Delayed inputs the identified model carries: ``δx(k+1) = F δx(k) + G₀ δu(k) + G₁
+        δu(k-1) + … + G_L δu(k-L) + w``, the exact zero-order-hold model of an input applied
+        up to ``L`` periods after its sample (a driver that writes a command at its next cycle,
+        a drive that adds a cycle, a velocity differenced over a period). All ``G_j`` are
+        identified; ``Ĝ(0)`` is Eq. 33's ``G`` split by ``input_delay``
+        (:func:`apc_feedback.linearize.split_input_matrix`); the control plans over
+        ``(δx(k), δu(k-1), …, δu(k-L))`` with ``horizon + L`` steps. 0 (default): Eq. 16.
+    input_delay : float
+        The delay (s) from a sample to the arm applying its command that ``Ĝ(0)`` is split by
+        (with ``input_lags``); robot mode measures it (:meth:`AdaptiveFeedback.expect_input_delay`).
     identify_min_speed : float
         No identification step while a joint's measured speed is below this at ``k-1`` or
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
@@ -252,11 +248,14 @@ class AdaptiveConfig:
         False,
         "refuse RLS steps that make G's velocity block (~T D^-1) indefinite; put the jump in w",
     )
-    command_delay: int = setting(
-        0, "periods from a command to the period the arm applies it over (0 or 1)", 0, 1
+    input_lags: int = setting(
+        0,
+        "delayed inputs the identified model carries (G_1 du(k-1), G_2 du(k-2)); 0 = Eq. 16",
+        0,
+        2,
     )
-    input_periods: int = setting(
-        1, "periods whose input reaches the next state: 2 for a differenced velocity", 1, 2
+    input_delay: float = setting(
+        0.0, "delay (s) from a sample to its command's application that splits G(0)", 0.0, 1.0
     )
     identify_min_speed: float = setting(
         0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3
@@ -287,7 +286,8 @@ class AdaptiveConfig:
         if self.trace_max < 0.0:
             trace_max = None
         elif self.trace_max == 0.0:
-            m = 3 * n_joints  # trace(P(0)), as a product where alpha is all of it (its rounding)
+            # trace(P(0)), as a product where alpha is all of it (its rounding)
+            m = (3 + self.input_lags) * n_joints
             if alpha_model is None:
                 trace_max = self.alpha * (m + 1)
             else:
@@ -341,7 +341,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self.model = model
         limit = np.asarray(model.effortLimit, dtype=float)
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
-        self.rls = Rls(model.nv, config.rls_config(model.nv))
+        self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
+        self._input_delay = config.input_delay
         self._set_weights(config)
         self.reset()
 
@@ -355,7 +356,6 @@ class AdaptiveFeedback(FeedbackLaw):
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
         self._Q_aug = np.diag(np.concatenate([q_diagonal, np.full(n, config.q_integral)]))
         self._identify_applied = config.identify_with == "applied"
-        self._memory = config.command_delay > 0 or config.input_periods > 1
 
     @property
     def settings(self) -> AdaptiveConfig:
@@ -371,7 +371,10 @@ class AdaptiveFeedback(FeedbackLaw):
             ``config`` changes a setting of the identifier (rho, alpha, forgetting,
             trace_max).
         """
-        if config.rls_config(self.n_joints) != self.config.rls_config(self.n_joints):
+        if (
+            config.rls_config(self.n_joints) != self.config.rls_config(self.n_joints)
+            or config.input_lags != self.config.input_lags
+        ):
             raise FeedbackError("the identifier's settings cannot change while it runs")
         self._set_weights(config)
 
@@ -384,18 +387,17 @@ class AdaptiveFeedback(FeedbackLaw):
         self.skipped_updates = 0
         self.stuck_updates = 0
         self._speed_prev = np.zeros(n)
-        # Applied perturbations a(k-1), a(k-2) and the last command (input memory only).
-        self._a_last = np.zeros(n)
-        self._a_before = np.zeros(n)
-        self._command_prev = np.zeros(n)
-        self._command_before = np.zeros(n)
-        self._u_n_known = False
         self._k_prev = 0
         # z(k-1) = (dx(k-1), du(k-1), 1) of Eq. 23, filled in place: dx(k) goes into its first
-        # 2n entries once du(k) is known, du(k-1) is written when sample k arrives.
-        self._z = np.zeros(3 * n + 1)
+        # 2n entries once du(k) is known, du(k-1) is written when sample k arrives. With lags
+        # the inputs are du(k-1), …, du(k-1-L), newest first; ``_inputs_known`` counts how
+        # many of them are the perturbations actually applied (a gap leaves them unknown).
+        lags = self.config.input_lags
+        self._z = np.zeros(self.rls.m)
         self._z[-1] = 1.0
-        self._z_dx, self._z_du = self._z[: 2 * n], self._z[2 * n : 3 * n]
+        self._z_dx, self._z_du = self._z[: 2 * n], self._z[2 * n : -1]
+        self._inputs = self._z_du.reshape(lags + 1, n)
+        self._inputs_known = 0
         self._dx = np.empty(2 * n)
         self._dx_q, self._dx_qd = self._dx[:n], self._dx[n:]
         self._du_prev = np.zeros(n)
@@ -424,29 +426,31 @@ class AdaptiveFeedback(FeedbackLaw):
         stuck = self._stuck(qd)
         trace_p = float("nan")
         if not self._started:
+            lags = self.config.input_lags
             F0, G0 = initial_model(
-                self.model, q_d, qd_d, u_n, self.config.period, self.config.initial_model
+                self.model,
+                q_d,
+                qd_d,
+                u_n,
+                self.config.period,
+                self.config.initial_model,
+                delay=self._input_delay if lags else 0.0,
+                input_lags=lags,
             )
-            # Two input periods share a held input's effect: G(0) = Eq. 33's G / 2.
-            self.rls.reset(F0, G0 / self.config.input_periods)
-            self._prior_input_gain = G0
+            self.rls.reset(F0, G0)
+            self._prior_input_gain = _summed_inputs(G0, self.n_joints)
             self._started = True
         elif k != self._k_prev + 1:
             skipped = True
             self.skipped_updates += 1
+            self._inputs_known = 0
         elif stuck:
             self.stuck_updates += 1
-            self._remember_applied(applied)
+            self._shift_inputs(applied)
+        elif not self._shift_inputs(applied):
+            skipped = True  # the inputs of a lag are not known yet (after a start or a gap)
+            self.skipped_updates += 1
         else:
-            if self._memory:
-                self._remember_applied(applied)
-                np.add(self._a_last, self._a_before, out=self._z_du)
-                if self.config.input_periods == 1:
-                    self._z_du[:] = self._a_last
-            elif applied is not None and self._identify_applied:
-                np.subtract(applied, self._u_n_prev, out=self._z_du)
-            else:
-                self._z_du[:] = self._du_prev
             try:
                 step = self.rls.update(self._z, dx)
                 residual, trace_p = step.residual, step.trace_p
@@ -461,17 +465,7 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.rejected_updates += 1
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
-        if self._memory:
-            if not self._u_n_known:  # the arm held the nominal torque before the first sample
-                self._command_prev = u_n.copy()
-            du = self._control_with_memory(dx, u_n)
-            self._command_before = self._command_prev
-            # What the arm will apply: the command within the model's effort limits (a drive
-            # clips it; an unclipped memory makes the plan expect torque that never comes).
-            self._command_prev = np.clip(u_n + du, -self._effort_limit, self._effort_limit)
-            self._u_n_known = True
-        else:
-            du = self._control(dx)
+        du = self._control(dx) if self.config.input_lags == 0 else self._control_lagged(dx)
         self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
@@ -486,9 +480,17 @@ class AdaptiveFeedback(FeedbackLaw):
 
     @property
     def identified_input_gain(self) -> np.ndarray:
-        """The identified effect of a perturbation held over one period, shape (2n, n): what
-        :attr:`prior_input_gain` started it from."""
-        return self.rls.G * self.config.input_periods
+        """The identified effect of a perturbation held over one period (with lags, the sum
+        of ``Ĝ₀ … Ĝ_L``), shape (2n, n): what :attr:`prior_input_gain` started it from."""
+        return _summed_inputs(self.rls.G, self.n_joints)
+
+    def expect_input_delay(self, seconds: float) -> None:
+        """Split ``Ĝ(0)`` by this delay (s) at the next (re)start instead of
+        ``config.input_delay``: robot mode's measured delay from a sample to the arm applying
+        its command. No effect on a model without lags."""
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            raise FeedbackError(f"input delay must be finite and >= 0 s, got {seconds}")
+        self._input_delay = float(seconds)
 
     def _g_physical(self) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
@@ -500,6 +502,8 @@ class AdaptiveFeedback(FeedbackLaw):
         explaining a refused step's residual as a jump of ``ŵ`` destabilises an hour-long run.
         """
         n = self.n_joints
+        if self.config.input_lags:
+            return bool((self.identified_input_gain[n:].diagonal() > 0.0).all())
         # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
         return bool((self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal() > 0.0).all())
 
@@ -538,49 +542,43 @@ class AdaptiveFeedback(FeedbackLaw):
         self._speed_prev = speed
         return stuck
 
-    def _remember_applied(self, applied: np.ndarray | None) -> None:
-        """Shift in ``a(k-1)``, the perturbation applied over ``[(k-1)T, kT)``: the reported
-        torque minus ``u_n(k-1)``, or (commanded, or no report) the command that period got."""
-        self._a_before[:] = self._a_last
+    def _shift_inputs(self, applied: np.ndarray | None) -> bool:
+        """Enter ``δu(k-1)`` (the reported torque minus ``u_n(k-1)``, or the command) into the
+        regressor's inputs, the older ones one lag down; whether all of them are known."""
+        inputs = self._inputs
+        if len(inputs) > 1:
+            inputs[1:] = inputs[:-1].copy()
         if applied is not None and self._identify_applied:
-            np.subtract(applied, self._u_n_prev, out=self._a_last)
-        elif self.config.command_delay == 0:
-            self._a_last[:] = self._du_prev
+            np.subtract(applied, self._u_n_prev, out=inputs[0])
         else:
-            np.subtract(self._command_before, self._u_n_prev, out=self._a_last)
+            inputs[0] = self._du_prev
+        self._inputs_known = min(self._inputs_known + 1, len(inputs))
+        return self._inputs_known == len(inputs)
 
-    def _control_with_memory(self, dx: np.ndarray, u_n: np.ndarray) -> np.ndarray:
-        """Optimal control over ``(δx(k), memory)`` for ``command_delay`` / ``input_periods``.
+    def _control_lagged(self, dx: np.ndarray) -> np.ndarray:
+        """Optimal control over ``(δx(k), δu(k-1), …, δu(k-L))`` with the lagged model.
 
-        The memory holds the applied perturbations the next states still depend on, newest
-        first: ``a(k)`` (delay 1: decided last sample), then ``a(k-1)`` (two input periods).
-        The decision is ``v = a(k + d)``; ``x(k+1) = F x + G Σ_j a(k-j) + w`` over the input
-        periods, the memory shifts by one per step; the horizon counts steps after the delay.
-        The integral state of :meth:`_control` is added on the position rows.
+        ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w`` with the decision ``v = δu(k)``; the
+        inputs shift one lag per step. The horizon counts ``horizon`` steps after the longest
+        lag, so the decision is weighed where it has acted. The integral state of
+        :meth:`_control` is added on the position rows.
         """
         config, n, T = self.config, self.n_joints, self.config.period
-        d, periods = config.command_delay, config.input_periods
-        F0, G0, w0 = self.rls.F, self.rls.G, self.rls.w
-        # a(k) = τ_c(k-1) - u_n(k): the command already on its way (delay 1).
-        memory = ([self._command_prev - u_n] if d else []) + ([self._a_last] if periods > 1 else [])
-        L, p = len(memory), 2 * n
-        s = p + L * n
+        lags = config.input_lags
+        p, s = 2 * n, 2 * n + lags * n
+        G_all = self.rls.G
         F = np.zeros((s, s))
+        F[:p, :p] = self.rls.F
+        F[:p, p:] = G_all[:, n:]
+        F[p + n :, p : s - n] = np.eye((lags - 1) * n)  # δu(k-j) -> δu(k-j-1)
         G = np.zeros((s, n))
-        F[:p, :p] = F0
-        for j in range(periods):  # a(k-j) is memory entry d-1+j, or the decision
-            i = d - 1 + j
-            if i < 0:
-                G[:p] += G0
-            else:
-                F[:p, p + i * n : p + (i + 1) * n] += G0
-        if L:
-            G[p : p + n] = np.eye(n)
-            for i in range(1, L):
-                F[p + i * n : p + (i + 1) * n, p + (i - 1) * n : p + i * n] = np.eye(n)
-        w = np.concatenate([w0, np.zeros(L * n)])
-        x = np.concatenate([dx, *memory])
-        q_diagonal = np.concatenate([self.Q.diagonal(), np.zeros(L * n)])
+        G[:p] = G_all[:, :n]
+        G[p : p + n] = np.eye(n)
+        w = np.zeros(s)
+        w[:p] = self.rls.w
+        # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
+        x = np.concatenate([dx, self._inputs[:lags].ravel()])
+        q_diagonal = np.concatenate([self.Q.diagonal(), np.zeros(lags * n)])
         if config.q_integral > 0.0:
             limit = config.integral_limit
             self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
@@ -592,8 +590,12 @@ class AdaptiveFeedback(FeedbackLaw):
             w = np.concatenate([w, T * w[:n]])
             x = np.concatenate([x, self.integral])
             q_diagonal = np.concatenate([q_diagonal, np.full(n, config.q_integral)])
-        v = receding_horizon_control(
-            F, G, w, np.diag(q_diagonal), self.R, x, config.horizon + d, check_weights=False
+        return receding_horizon_control(
+            F, G, w, np.diag(q_diagonal), self.R, x, config.horizon + lags, check_weights=False
         )
-        # v = a(k+d) = τ_c(k) - u_n(k+d), u_n(k+d) extrapolated from u_n(k-1), u_n(k).
-        return v + d * (u_n - self._u_n_prev) if self._u_n_known else v
+
+
+def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
+    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (2n, (L+1) n): the effect of an input held
+    over every lag's period."""
+    return G.reshape(G.shape[0], -1, n).sum(axis=1)

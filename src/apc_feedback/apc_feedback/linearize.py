@@ -15,6 +15,19 @@ series of the zero-order-hold discretisation:
 The paper prints Eq. 33b as ``B T + A B T^2 + A^2 B T^3 / 2``; the exact zero-order hold,
 ``G = integral_0^T exp(A s) ds B = B T + A B T^2/2! + A^2 B T^3/3! + ...``, has the factorials.
 The printed form stays selectable (``form="printed"``) for comparison.
+
+An input that reaches the arm late. When the command decided at ``kT`` is applied over
+``[kT + τ, (k+1)T + τ)`` (a driver that writes it at its next cycle, a drive that adds a cycle of
+its own), the exact discrete model has more than one input matrix (the zero-order hold with a
+fractional input delay: G. F. Franklin, J. D. Powell and M. L. Workman, *Digital Control of
+Dynamic Systems*, 3rd ed., Addison-Wesley 1998, sec. 4.3.4). With ``τ = d T + f``,
+``0 <= f < T``, the period ``[kT, (k+1)T)`` holds ``u(k-d-1)`` for ``f`` and ``u(k-d)`` after it:
+
+    x(k+1) = F x(k) + G_d u(k-d) + G_(d+1) u(k-d-1),
+    G_d = Γ(T - f),   G_(d+1) = Γ(T) - Γ(T - f),   Γ(s) = integral_0^s exp(A t) dt B,
+
+so the input matrices sum to Eq. 33's ``G``. :func:`split_input_matrix` gives them with the
+same truncated series as Eq. 33b (``Γ(s) = B s + A B s^2/2 + A^2 B s^3/6``).
 """
 
 from __future__ import annotations
@@ -111,6 +124,58 @@ def discretize_series(
     return F, G
 
 
+def input_series(
+    A: np.ndarray, B: np.ndarray, duration: float, form: SeriesForm = "corrected"
+) -> np.ndarray:
+    """``Γ(s)``, the effect of an input held for ``duration = s`` seconds, by Eq. 33b's series
+    (``form`` as in :func:`discretize_series`; ``Γ(T)`` is Eq. 33b's ``G``)."""
+    s = float(duration)
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    AB = A @ B
+    if form == "corrected":
+        return B * s + AB * (s**2 / 2.0) + (A @ AB) * (s**3 / 6.0)
+    if form == "printed":
+        return B * s + AB * s**2 + (A @ AB) * (s**3 / 2.0)
+    raise LinearizeError(f"form must be 'corrected' or 'printed', got {form!r}")
+
+
+def split_input_matrix(
+    A: np.ndarray,
+    B: np.ndarray,
+    period: float,
+    delay: float,
+    input_lags: int,
+    form: SeriesForm = "corrected",
+) -> np.ndarray:
+    """``[G_0 G_1 … G_L]`` of an input applied ``delay`` seconds after its sample (module
+    docstring), shape (p, (L+1) n); they sum to Eq. 33b's ``G``.
+
+    A delay longer than the ``input_lags`` periods the model carries is taken as ``L T`` (all
+    of ``G`` in ``G_L``).
+    """
+    if not period > 0.0:
+        raise LinearizeError(f"period must be > 0, got {period}")
+    if not (np.isfinite(delay) and delay >= 0.0):
+        raise LinearizeError(f"delay must be finite and >= 0 s, got {delay}")
+    if isinstance(input_lags, bool) or not isinstance(input_lags, int) or input_lags < 0:
+        raise LinearizeError(f"input_lags must be an int >= 0, got {input_lags!r}")
+    T = float(period)
+    delay = min(float(delay), input_lags * T)
+    d = min(int(delay // T), input_lags)
+    f = delay - d * T
+    G = input_series(A, B, T, form)
+    p, n = G.shape
+    out = np.zeros((p, (input_lags + 1) * n))
+    if d == input_lags or f <= 0.0:
+        out[:, d * n : (d + 1) * n] = G
+        return out
+    G_d = input_series(A, B, T - f, form)
+    out[:, d * n : (d + 1) * n] = G_d
+    out[:, (d + 1) * n : (d + 2) * n] = G - G_d
+    return out
+
+
 def discretize_exact(A: np.ndarray, B: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation (Eqs. 19-20 with constant A, B).
 
@@ -133,13 +198,20 @@ def initial_model(
     tau: np.ndarray,
     period: float,
     form: SeriesForm = "corrected",
+    *,
+    delay: float = 0.0,
+    input_lags: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``F(0), G(0)`` of Eq. 33 at the first nominal point ``(q_d(0), qd_d(0), u_n(0))``.
+    """``F(0), G(0)`` of Eq. 33 at the first nominal point ``(q_d(0), qd_d(0), u_n(0))``;
+    with ``input_lags``, ``G(0)`` split by ``delay`` (:func:`split_input_matrix`).
 
     Returns
     -------
     F0 : (2n, 2n) ndarray
-    G0 : (2n, n) ndarray
+    G0 : (2n, n) ndarray, or (2n, (L+1) n) with lags
     """
     A, B = continuous_jacobians(model, model.createData(), q, qd, tau)
-    return discretize_series(A, B, period, form)
+    F, G = discretize_series(A, B, period, form)
+    if input_lags == 0 and delay == 0.0:
+        return F, G
+    return F, split_input_matrix(A, B, period, delay, input_lags, form)

@@ -78,8 +78,8 @@ def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     """
     return {
         **recommended_settings(alpha),
-        "command_delay": 1,
-        "input_periods": 2,
+        "input_lags": 2,
+        "input_delay": 0.01,
     }
 
 

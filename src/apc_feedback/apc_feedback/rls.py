@@ -118,19 +118,20 @@ class RlsConfig:
     trace_max: float | None = None
     alpha_model: float | None = None
 
-    def initial_p_diagonal(self, n_joints: int) -> np.ndarray:
-        """The diagonal of ``P(0)`` for an arm of ``n_joints``, shape (3n+1,)."""
+    def initial_p_diagonal(self, n_joints: int, input_lags: int = 0) -> np.ndarray:
+        """The diagonal of ``P(0)`` for an arm of ``n_joints`` whose model has ``input_lags``
+        delayed inputs, shape (2n + (1 + lags) n + 1,)."""
         model = self.alpha if self.alpha_model is None else self.alpha_model
-        return np.concatenate([np.full(3 * n_joints, model), [self.alpha]])
+        return np.concatenate([np.full((3 + input_lags) * n_joints, model), [self.alpha]])
 
-    def block_trace_max(self, n_joints: int) -> np.ndarray | None:
-        """Per block of ``P`` (``δx``, ``δu``, constant rows), the bound on its trace; None when
-        one bound on ``trace(P)`` is the guard (no ``alpha_model``) or there is no guard."""
+    def block_trace_max(self, n_joints: int, input_lags: int = 0) -> np.ndarray | None:
+        """Per block of ``P`` (``δx``, the inputs, constant rows), the bound on its trace; None
+        when one bound on ``trace(P)`` is the guard (no ``alpha_model``) or there is no guard."""
         if self.trace_max is None or self.alpha_model is None:
             return None
-        diagonal = self.initial_p_diagonal(n_joints)
-        n = n_joints
-        blocks = np.array([diagonal[: 2 * n].sum(), diagonal[2 * n : 3 * n].sum(), diagonal[-1]])
+        diagonal = self.initial_p_diagonal(n_joints, input_lags)
+        p = 2 * n_joints
+        blocks = np.array([diagonal[:p].sum(), diagonal[p:-1].sum(), diagonal[-1]])
         return blocks * (self.trace_max / diagonal.sum())
 
     def __post_init__(self) -> None:
@@ -223,6 +224,11 @@ class Rls:
     n_joints : int
         n ≥ 1. The state has ``p = 2n`` entries, the regressor ``m = 3n+1``.
     config : RlsConfig
+    input_lags : int
+        Delayed inputs the model carries (0: Eq. 16). With ``L`` lags the regressor is
+        ``z(k) = (δx(k), δu(k), δu(k-1), …, δu(k-L), 1)`` (``m = 2n + (L+1) n + 1``) and
+        ``Θᵀ = [F G₀ G₁ … G_L w]``: the exact discrete model of a zero-order hold whose input
+        reaches the arm up to ``L`` periods late (:mod:`apc_feedback.linearize`).
 
     Notes
     -----
@@ -235,16 +241,20 @@ class Rls:
     estimator.
     """
 
-    def __init__(self, n_joints: int, config: RlsConfig) -> None:
+    def __init__(self, n_joints: int, config: RlsConfig, input_lags: int = 0) -> None:
         if isinstance(n_joints, bool) or not isinstance(n_joints, int | np.integer):
             raise RlsError(f"n_joints must be an int, got {n_joints!r}")
         if n_joints < 1:
             raise RlsError(f"n_joints must be >= 1, got {n_joints}")
         if not isinstance(config, RlsConfig):
             raise RlsError(f"config must be an RlsConfig, got {type(config).__name__}")
+        if isinstance(input_lags, bool) or not isinstance(input_lags, int) or input_lags < 0:
+            raise RlsError(f"input_lags must be an int >= 0, got {input_lags!r}")
         self._n = int(n_joints)
         self._p = 2 * self._n
-        self._m = 3 * self._n + 1
+        self._lags = input_lags
+        self._q = (input_lags + 1) * self._n  # input entries of z
+        self._m = self._p + self._q + 1
         self._config = config
         self._exponential = config.forgetting == "exponential"
         m, p = self._m, self._p
@@ -262,11 +272,11 @@ class Rls:
         self._k = 0
         self._can_undo = False
         self._theta0 = np.zeros((m, p))
-        self._P0 = np.diag(config.initial_p_diagonal(self._n))
+        self._P0 = np.diag(config.initial_p_diagonal(self._n, input_lags))
         # Block guard (alpha_model): the bound of each block's trace, each row's block, and a
         # buffer for the congruence's scale (see the module docstring).
-        self._block_max = config.block_trace_max(self._n)
-        self._block_of_row = np.repeat([0, 1, 2], [p, self._n, 1])
+        self._block_max = config.block_trace_max(self._n, input_lags)
+        self._block_of_row = np.repeat([0, 1, 2], [p, self._q, 1])
         self._block_scale = np.empty((m, m))
         self._restore()
 
@@ -288,8 +298,13 @@ class Rls:
 
     @property
     def m(self) -> int:
-        """m = 3n+1, the regressor dimension (Eq. 23)."""
+        """m = 3n+1, the regressor dimension (Eq. 23); ``2n + (L+1) n + 1`` with ``L`` lags."""
         return self._m
+
+    @property
+    def input_lags(self) -> int:
+        """Delayed inputs the model carries (0: Eq. 16)."""
+        return self._lags
 
     @property
     def n_updates(self) -> int:
@@ -298,7 +313,7 @@ class Rls:
 
     @property
     def theta(self) -> np.ndarray:
-        """Copy of Θ = [F G w]ᵀ, shape (3n+1, 2n) (Eq. 22)."""
+        """Copy of Θ = [F G w]ᵀ, shape (m, 2n) (Eq. 22)."""
         return self._views[self._cur].theta_t.T.copy()
 
     @property
@@ -313,13 +328,13 @@ class Rls:
 
     @property
     def G(self) -> np.ndarray:
-        """Copy of Ĝ, shape (2n, n)."""
-        return self._views[self._cur].theta_t[:, self._p : self._p + self._n].copy()
+        """Copy of Ĝ, shape (2n, n); with lags ``[Ĝ₀ Ĝ₁ … Ĝ_L]``, shape (2n, (L+1) n)."""
+        return self._views[self._cur].theta_t[:, self._p : self._p + self._q].copy()
 
     @property
     def w(self) -> np.ndarray:
         """Copy of ŵ, shape (2n,)."""
-        return self._views[self._cur].theta_t[:, self._p + self._n].copy()
+        return self._views[self._cur].theta_t[:, self._p + self._q].copy()
 
     @property
     def trace_p(self) -> float:
@@ -327,7 +342,7 @@ class Rls:
         return self._traces[self._cur]
 
     def model_view(self) -> np.ndarray:
-        """Read-only view of ``Θᵀ = [F̂ Ĝ ŵ]``, shape (2n, 3n+1), without a copy.
+        """Read-only view of ``Θᵀ = [F̂ Ĝ ŵ]``, shape (2n, m), without a copy.
 
         For a per-sample loop that reads the model right after an update (the feedback law's
         Eq. 35). The view shows the estimate as it is now and is not valid after the next
@@ -355,8 +370,9 @@ class Rls:
         ----------
         F0 : array_like, shape (2n, 2n)
             F̂(0), e.g. from Eq. 33a.
-        G0 : array_like, shape (2n, n)
-            Ĝ(0), e.g. from Eq. 33b.
+        G0 : array_like, shape (2n, n), or (2n, (L+1) n) with lags
+            Ĝ(0), e.g. from Eq. 33b (with lags, split by the delay:
+            :func:`apc_feedback.linearize.split_input_matrix`).
         w0 : array_like, shape (2n,), optional
             ŵ(0); default 0.
         P0 : array_like, shape (3n+1, 3n+1), optional
@@ -375,12 +391,12 @@ class Rls:
             return
         if F0 is None or G0 is None:
             raise RlsError("reset needs both F0 and G0 (or no argument to restore)")
-        n, p, m = self._n, self._p, self._m
+        n, p, m, q = self._n, self._p, self._m, self._q
         F0a = _matrix("F0", F0, (p, p))
-        G0a = _matrix("G0", G0, (p, n))
+        G0a = _matrix("G0", G0, (p, q))
         w0a = np.zeros(p) if w0 is None else _matrix("w0", w0, (p,))
         if P0 is None:
-            P0a = np.diag(self._config.initial_p_diagonal(n))
+            P0a = np.diag(self._config.initial_p_diagonal(n, self._lags))
         else:
             P0a = _matrix("P0", P0, (m, m))
             scale = max(1.0, float(np.max(np.abs(P0a))))
@@ -393,8 +409,8 @@ class Rls:
                 raise RlsError("P0 must be positive definite") from None
         theta0 = np.empty((m, p))
         theta0[:p] = F0a.T
-        theta0[p : p + n] = G0a.T
-        theta0[p + n] = w0a
+        theta0[p : p + q] = G0a.T
+        theta0[p + q] = w0a
         self._theta0 = theta0
         self._P0 = P0a
         self._restore()
@@ -519,9 +535,9 @@ class Rls:
     def _guard_blocks(self, views: _BufferViews) -> tuple[float, bool]:
         """The guard with a model prior: ``P ← S P S``, ``S`` = ``sqrt(bound / trace)`` on each
         block over its bound, 1 elsewhere; returns trace(P) and whether it acted."""
-        n, p = self._n, self._p
+        p = self._p
         diagonal = views.diagonal
-        traces = np.array([_sum(diagonal[:p]), _sum(diagonal[p : p + n]), diagonal[-1]])
+        traces = np.array([_sum(diagonal[:p]), _sum(diagonal[p:-1]), diagonal[-1]])
         over = traces > self._block_max
         if not over.any():
             return float(_sum(traces)), False
@@ -549,36 +565,43 @@ class Rls:
         ----------
         dx : array_like, shape (2n,)
             δx(k) = x(k) - x_n(k), positions then velocities.
-        du : array_like, shape (n,)
-            δu(k), the perturbation torque applied over [kT, (k+1)T).
+        du : array_like, shape (n,), or ((L+1) n,) with lags
+            δu(k), the perturbation torque applied over [kT, (k+1)T) (with lags, followed by
+            δu(k-1), …, δu(k-L)).
         out : numpy.ndarray, shape (3n+1,), optional
             Float64 buffer to write into (avoids an allocation per sample).
 
         Returns
         -------
-        numpy.ndarray, shape (3n+1,)
+        numpy.ndarray, shape (2n + len(du) + 1,)
 
         Raises
         ------
         RlsError
-            If ``du`` is not a finite (n,) vector with n ≥ 1, ``dx`` not a finite (2n,)
-            vector, or ``out`` not a float64 (3n+1,) array.
+            If ``dx`` is not a finite (2n,) vector with n ≥ 1, ``du`` not a finite vector of
+            a whole number of n entries, or ``out`` not a float64 array of the regressor's
+            shape.
         """
+        dx_a = np.asarray(dx, dtype=float)
+        if dx_a.ndim != 1 or dx_a.shape[0] < 2 or dx_a.shape[0] % 2:
+            raise RlsError(f"dx must have shape (2n,) with n >= 1, got {dx_a.shape}")
+        p = dx_a.shape[0]
+        dx_a = _vector("dx", dx_a, p)
         du_a = np.asarray(du, dtype=float)
-        if du_a.ndim != 1 or du_a.shape[0] < 1:
-            raise RlsError(f"du must have shape (n,) with n >= 1, got {du_a.shape}")
-        n = du_a.shape[0]
-        du_a = _vector("du", du_a, n)
-        dx_a = _vector("dx", dx, 2 * n)
+        if du_a.ndim != 1 or du_a.shape[0] < p // 2 or du_a.shape[0] % (p // 2):
+            raise RlsError(
+                f"du must have shape (n,) or ((L+1) n,) with n = {p // 2}, got {du_a.shape}"
+            )
+        q = du_a.shape[0]
+        du_a = _vector("du", du_a, q)
+        m = p + q + 1
         if out is None:
-            out = np.empty(3 * n + 1)
-        elif not (
-            isinstance(out, np.ndarray) and out.shape == (3 * n + 1,) and out.dtype == np.float64
-        ):
-            raise RlsError(f"out must be a float64 array of shape ({3 * n + 1},)")
-        out[: 2 * n] = dx_a
-        out[2 * n : 3 * n] = du_a
-        out[3 * n] = 1.0
+            out = np.empty(m)
+        elif not (isinstance(out, np.ndarray) and out.shape == (m,) and out.dtype == np.float64):
+            raise RlsError(f"out must be a float64 array of shape ({m},)")
+        out[:p] = dx_a
+        out[p : p + q] = du_a
+        out[-1] = 1.0
         return out
 
 
@@ -593,11 +616,11 @@ def rls_update_reference(
 
     Parameters
     ----------
-    theta : numpy.ndarray, shape (3n+1, 2n)
-        Θ(k) = [θ₁ … θ_p] (Eq. 22).
-    P : numpy.ndarray, shape (3n+1, 3n+1)
+    theta : numpy.ndarray, shape (m, 2n)
+        Θ(k) = [θ₁ … θ_p] (Eq. 22); ``m = 3n+1``, or ``2n + (L+1) n + 1`` with ``L`` lags.
+    P : numpy.ndarray, shape (m, m)
         P(k), symmetric positive definite.
-    z : numpy.ndarray, shape (3n+1,)
+    z : numpy.ndarray, shape (m,)
         z(k) (Eq. 23).
     dx_next : numpy.ndarray, shape (2n,)
         The measured δx(k+1).
@@ -622,15 +645,16 @@ def rls_update_reference(
     P_next = P - gamma * P @ np.outer(z, z) @ P  # Eq. 30 as printed
     if config.forgetting == "exponential":
         P_next = P_next / config.rho  # Eq. 30 corrected
-    n = theta.shape[1] // 2
-    block_max = config.block_trace_max(n)
+    p, m = theta.shape[1], theta.shape[0]
+    n = p // 2
+    block_max = config.block_trace_max(n, (m - p - 1) // n - 1)
     if block_max is None:
         clipped = config.trace_max is not None and np.trace(P_next) > config.trace_max
         if clipped:
             P_next = P_next * (config.trace_max / np.trace(P_next))  # wind-up guard
-    else:  # each block of P (δx, δu and constant rows) within its bound, by S P S
-        blocks = (slice(0, 2 * n), slice(2 * n, 3 * n), slice(3 * n, 3 * n + 1))
-        scale = np.ones(3 * n + 1)
+    else:  # each block of P (δx, the inputs and constant rows) within its bound, by S P S
+        blocks = (slice(0, p), slice(p, m - 1), slice(m - 1, m))
+        scale = np.ones(m)
         for block, bound in zip(blocks, block_max, strict=True):
             trace = np.trace(P_next[block, block])
             if trace > bound:
