@@ -49,8 +49,8 @@ BASELINES = ("computed_torque", "pid")
 # The AdaptiveConfig options added to the recommended preset for each effect (none: nothing to
 # answer), chosen one effect at a time; "all" combines them.
 FIXES = {
-    "velocity_difference": {"input_periods": 2},
-    "delay": {"command_delay": 1},
+    "velocity_difference": {"input_lags": 2, "input_delay": 0.005},
+    "delay": {"input_lags": 2, "input_delay": 0.01},
     "all": {k: v for k, v in physical_settings().items() if k not in recommended_settings()},
 }
 

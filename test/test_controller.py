@@ -295,3 +295,60 @@ def test_law_parameters_take_run_time_settings_at_the_next_sample_all_or_none(co
     none = LawParameters(_law_values(controller="none"), controller_robot)
     with pytest.raises(ConfigError, match="not used by controller 'none'"):
         none.propose({"gains.kp": 1.0})
+
+
+def _regulate_delayed(robot, lags, delay_periods, samples=400):
+    """The recommended preset with ``lags`` against a true linear perturbation system whose
+    input reaches it ``delay_periods`` periods late (the split model of Eq. 33's G): δx after
+    ``samples``, and the law."""
+    from apc_feedback.linearize import continuous_jacobians, split_input_matrix
+    from apc_feedback.presets import recommended_settings
+
+    T = 0.01
+    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    tau0 = pin.rnea(robot.model, robot.model.createData(), q0, np.zeros(3), np.zeros(3))
+    A, B = continuous_jacobians(robot.model, robot.model.createData(), q0, np.zeros(3), tau0)
+    F, _ = initial_model(robot.model, q0, np.zeros(3), tau0, T)
+    G_true = split_input_matrix(A, B, T, delay_periods * T, 2)
+    settings = {**recommended_settings(), "input_lags": lags, "input_delay": delay_periods * T}
+    law = AdaptiveFeedback(robot.model, AdaptiveConfig.from_dict(settings))
+    dx = np.concatenate([np.deg2rad([1.0, -1.0, 1.0]), np.zeros(3)])
+    history = [np.zeros(3)] * 3
+    for k in range(samples):
+        out = law.update(k, q0 + dx[:3], dx[3:], q0, np.zeros(3), np.zeros(3), tau0, None)
+        # The drive clips the command to the effort limits, as the law's memory of it does.
+        limit = robot.effort_limit
+        history = [np.clip(tau0 + out.du, -limit, limit) - tau0, *history[:2]]
+        dx = F @ dx + G_true @ np.concatenate(history)
+    return dx, law
+
+
+@pytest.mark.parametrize("delay_periods", [0.0, 0.4, 1.0, 1.6])
+def test_lagged_law_regulates_a_plant_whose_input_arrives_late(controller_robot, delay_periods):
+    """Delays from 0 to 2T (a command applied up to two periods after its sample): with two
+    lags the law brings a 1 deg error to rest; with Eq. 16 alone a delay of a period or more
+    loses it."""
+    dx, _ = _regulate_delayed(controller_robot, 2, delay_periods)
+    assert np.abs(dx[:3]).max() < np.deg2rad(1e-3)
+    if delay_periods >= 1.0:
+        with np.errstate(all="ignore"):
+            lost, _ = _regulate_delayed(controller_robot, 0, delay_periods)
+        assert not np.abs(lost[:3]).max() < np.deg2rad(1.0)
+
+
+def test_lagged_law_splits_g0_by_the_expected_delay(controller_robot):
+    """Ĝ(0) is Eq. 33's G split by the delay: a whole period puts it in Ĝ₁."""
+    law = AdaptiveFeedback(controller_robot.model, AdaptiveConfig(input_lags=2))
+    law.expect_input_delay(0.01)
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(controller_robot.model, controller_robot.model.createData(), q_d, qd_d, qdd_d)
+    law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    _, G0 = initial_model(controller_robot.model, q_d, qd_d, u_n, 0.01)
+    G = law.rls.G
+    assert G.shape == (6, 9)
+    np.testing.assert_array_equal(G[:, :3], 0.0)
+    np.testing.assert_allclose(G[:, 3:6], G0, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(G[:, 6:], 0.0)
+    np.testing.assert_allclose(law.prior_input_gain, G0, rtol=1e-12, atol=1e-15)
+    with pytest.raises(FeedbackError, match="delay"):
+        law.expect_input_delay(-1.0)

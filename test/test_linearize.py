@@ -15,6 +15,7 @@ from apc_feedback.linearize import (
     discretize_exact,
     discretize_series,
     initial_model,
+    split_input_matrix,
 )
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
@@ -160,3 +161,47 @@ def test_bad_arguments_raise():
         continuous_jacobians(
             model, model.createData(), np.zeros(6), np.zeros(6), np.full(6, np.nan)
         )
+
+
+def _double_integrator(n: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """``q'' = u`` per joint: ``A² = 0``, so Eq. 33's series is the exact hold."""
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    B = np.zeros((2 * n, n))
+    B[n:] = np.eye(n)
+    return A, B
+
+
+def _delayed_step(A, B, x, inputs, delay, period, steps=2000):
+    """x((k+1)T) of ``x' = A x + B u(t - delay)`` by fine Euler-free exact sub-steps, with the
+    commands ``inputs[j]`` = u(k-j) decided at (k-j)T and held one period each."""
+    F_h, G_h = discretize_exact(A, B, period / steps)
+    for i in range(steps):
+        t = (i + 0.5) * period / steps - delay  # the command in force now was decided at t
+        j = int(np.floor(-t / period)) + 1 if t < 0 else 0
+        x = F_h @ x + G_h @ inputs[j]
+    return x
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.003, 0.010, 0.0137, 0.020])
+def test_split_input_matrix_is_the_hold_with_a_late_input(delay):
+    """The split model (Franklin, Powell & Workman) equals the continuous system whose input
+    arrives ``delay`` late, for delays from 0 to 2T, and its matrices sum to Eq. 33's G."""
+    A, B = _double_integrator()
+    rng = np.random.default_rng(3)
+    G_all = split_input_matrix(A, B, T, delay, 2)
+    F, G = discretize_series(A, B, T)
+    np.testing.assert_allclose(G_all.reshape(4, 3, 2).sum(axis=1), G, atol=1e-15)
+    x = rng.standard_normal(4)
+    inputs = [rng.standard_normal(2) for _ in range(3)]
+    expected = _delayed_step(A, B, x, inputs, delay, T)
+    np.testing.assert_allclose(F @ x + G_all @ np.concatenate(inputs), expected, atol=1e-9)
+
+
+def test_split_input_matrix_takes_a_longer_delay_as_the_last_lag():
+    A, B = _double_integrator()
+    _, G = discretize_series(A, B, T)
+    np.testing.assert_array_equal(split_input_matrix(A, B, T, 0.015, 1)[:, 2:], G)
+    np.testing.assert_array_equal(split_input_matrix(A, B, T, 0.0, 0), G)
+    with pytest.raises(LinearizeError, match="delay"):
+        split_input_matrix(A, B, T, -1e-3, 1)

@@ -100,6 +100,49 @@ def test_recovers_known_system_from_noise_free_data(rho: float) -> None:
     np.testing.assert_allclose(rls.predict(z), dx_next, rtol=1e-8, atol=1e-8)
 
 
+@pytest.mark.parametrize("lags", [1, 2])
+def test_recovers_the_input_matrices_of_a_delayed_plant(lags: int) -> None:
+    """Data of ``δx(k+1) = F δx(k) + G₀ δu(k) + G₁ δu(k-1) + G₂ δu(k-2) + w`` (an input that
+    reaches the plant late): the lagged regressor recovers every input matrix."""
+    rng = np.random.default_rng(7)
+    F, _, w = random_system(rng)
+    G_all = rng.standard_normal((P_DIM, (lags + 1) * N))
+    rls = Rls(N, RlsConfig(rho=0.95, alpha=1e8), input_lags=lags)
+    assert rls.m == P_DIM + (lags + 1) * N + 1
+    rls.reset(np.eye(P_DIM), np.zeros((P_DIM, (lags + 1) * N)))
+    inputs = [rng.standard_normal(N) for _ in range(lags)]
+    dx = rng.standard_normal(P_DIM)
+    for _ in range(200):
+        inputs.insert(0, rng.standard_normal(N))  # δu(k), then δu(k-1), …
+        du = np.concatenate(inputs[: lags + 1])
+        dx_next = F @ dx + G_all @ du + w
+        rls.update(Rls.regressor(dx, du), dx_next)
+        dx = dx_next / max(1.0, float(np.abs(dx_next).max()))  # keep the data scaled
+    assert rel_err(rls.G, G_all) < 1e-8
+    assert rel_err(rls.F, F) < 1e-8
+    assert rel_err(rls.w, w) < 1e-8
+
+
+def test_model_prior_guard_bounds_the_input_block_with_lags() -> None:
+    config = RlsConfig(alpha=1e3, alpha_model=1e-3, trace_max=1e3 + 15 * 1e-3)
+    np.testing.assert_allclose(config.block_trace_max(N, 2), [6e-3, 9e-3, 1e3])
+    rls = Rls(N, config, input_lags=2)
+    z = np.zeros(rls.m)
+    z[-1] = 1.0
+    for _ in range(500):  # a hold: nothing but the constant row is excited
+        rls.update(z, np.zeros(P_DIM))
+    d = rls.P.diagonal()
+    assert d[:P_DIM].sum() <= 6e-3 * (1 + 1e-12)
+    assert d[P_DIM:-1].sum() <= 9e-3 * (1 + 1e-12)
+
+
+def test_lags_are_checked() -> None:
+    with pytest.raises(RlsError, match="input_lags"):
+        Rls(N, RlsConfig(), input_lags=-1)
+    with pytest.raises(RlsError, match="G0"):
+        Rls(N, RlsConfig(), input_lags=1).reset(np.eye(P_DIM), np.zeros((P_DIM, N)))
+
+
 def _batch_solution(
     theta0: np.ndarray,
     P0: np.ndarray,

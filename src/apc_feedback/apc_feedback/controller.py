@@ -543,12 +543,20 @@ class AdaptiveFeedback(FeedbackLaw):
         return stuck
 
     def _shift_inputs(self, applied: np.ndarray | None) -> bool:
-        """Enter ``δu(k-1)`` (the reported torque minus ``u_n(k-1)``, or the command) into the
-        regressor's inputs, the older ones one lag down; whether all of them are known."""
+        """Enter ``δu(k-1)`` into the regressor's inputs, the older ones one lag down; whether
+        all of them are known.
+
+        Without lags ``δu(k-1)`` is the torque the plant reports it applied over
+        ``[(k-1)T, kT)`` minus ``u_n(k-1)`` (or the command). With lags it is the command sent
+        at ``k-1``, within the model's effort limits, minus ``u_n(k-1)``: the lags model when
+        a command takes effect, and a report of what was applied has the delay in it already.
+        """
         inputs = self._inputs
         if len(inputs) > 1:
             inputs[1:] = inputs[:-1].copy()
-        if applied is not None and self._identify_applied:
+            limit = self._effort_limit
+            inputs[0] = np.clip(self._u_n_prev + self._du_prev, -limit, limit) - self._u_n_prev
+        elif applied is not None and self._identify_applied:
             np.subtract(applied, self._u_n_prev, out=inputs[0])
         else:
             inputs[0] = self._du_prev

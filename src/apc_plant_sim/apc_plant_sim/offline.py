@@ -142,7 +142,7 @@ def run_closed_loop(
         if fb.residual is not None:
             residual_norm[i] = float(np.linalg.norm(fb.residual))
         if rls is not None:
-            F[i], G[i], w[i] = rls.F, rls.G, rls.w
+            F[i], G[i], w[i] = rls.F, feedback.identified_input_gain, rls.w
         if plant_changes and k in plant_changes:
             plant.set_robot(plant_changes[k])
         if i < n_samples:
