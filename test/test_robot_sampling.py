@@ -285,9 +285,7 @@ def test_sample_timing_figures_from_a_333_hz_driver():
             timing.commanded(t, arrival + 50_000)
     f = timing.figures()
     assert set(f) == {
-        f"{name}_{figure}_us"
-        for name in SampleTiming.NAMES
-        for figure in ("median", "p99", "max")
+        f"{name}_{figure}_us" for name in SampleTiming.NAMES for figure in ("median", "p99", "max")
     }
     assert f["sample_phase_median_us"] == f["sample_phase_max_us"] == 500.0
     assert f["driver_period_median_us"] == f["driver_period_max_us"] == period * 1e-3

@@ -232,7 +232,7 @@ class RobotLoop:
     def deactivate(self) -> np.ndarray | None:
         """Stop; the last command (gravity hold at the newest position), None without one."""
         self.sampler.stop()
-        self.active = False
+        self.active, self.command_state_ns = False, None
         self._pending, self._start_stamp = None, None
         self._setpoints.clear()
         return self._hold_command()
@@ -247,7 +247,7 @@ class RobotLoop:
             return NOTHING
         if self.faulted:
             return NOTHING
-        self.faulted, self._pending = True, None
+        self.faulted, self._pending, self.command_state_ns = True, None, None
         self.sampler.start()  # the driver may come back on another cycle
         self.count("watchdog")
         self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
