@@ -359,7 +359,7 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         _spin_sim(graph, driver, 0.2)
         assert len(driver.commands) > n + 15
         start = wire.msg_to_setpoint(starts[0], driver.names)
-        # the tick of a re-activation has a phase of its own: the position at one of the
+        # a re-activation locks the phase afresh: the start is the position at one of the
         # driver's steps within the period after the sample's stamp
         step_ns = round(driver.dt * wire.NS_PER_S)
         nearest = min(
