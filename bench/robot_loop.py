@@ -160,10 +160,9 @@ class RobotRun:
 # ---------------------------------------------------------------------------------- analysis
 COUNTERS = (
     "samples_taken",
-    "missed_ticks",
+    "missed_samples",
     "missed_setpoint",
     "late_setpoints",
-    "no_new_state",
     "watchdog",
     "stale",
 )

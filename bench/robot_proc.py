@@ -20,8 +20,9 @@ Measured without touching ``src/``, through public attributes:
   the feedforward is matched and a joint state has arrived, ``--tick-phase`` seconds after a
   joint state's stamp (its sample timer then ticks at that phase of the driver's cycle). For
   every command ``robot_node`` publishes: the data, the stamp of the joint state its sample
-  was taken from (the tick's time minus the state's age, ``loop.sampler.last``), the tick's
-  time and the publish time (all on the node clock, the system clock here, as the driver's).
+  was taken from (``loop.sampler.last``), the time that state was sampled (its arrival: samples
+  are taken on arrival, whatever ``--tick-phase``) and the publish time (all on
+  the node clock, the system clock here, as the driver's).
 
 At SIGINT the process writes what it noted to ``--out``; ``robot_loop.py`` matches commands to
 their joint states by their data (bit-exact floats across DDS).
@@ -81,13 +82,12 @@ class CommandProbe:
         self._state_ns = -1
         self._tick_ns = -1
         loop = node.loop
-        tick, publish = loop.tick, node._publish
+        on_joint_state, publish = loop.on_joint_state, node._publish
 
-        def timed_tick(now_ns: int) -> Any:
-            step = tick(now_ns)
-            take = loop.sampler.last
-            if take.sample is not None:
-                self._state_ns, self._tick_ns = now_ns - take.age_ns, now_ns
+        def timed_on_joint_state(state: Any, now_ns: int) -> Any:
+            step = on_joint_state(state, now_ns)
+            if step.sample is not None:  # sampled on the state's arrival
+                self._state_ns, self._tick_ns = loop.sampler.last.state_ns, now_ns
             return step
 
         def timed_publish(step: Any) -> None:
@@ -96,7 +96,7 @@ class CommandProbe:
                 now_ns = node.get_clock().now().nanoseconds
                 self.sent.append((step.command.tolist(), self._state_ns, self._tick_ns, now_ns))
 
-        loop.tick = timed_tick
+        loop.on_joint_state = timed_on_joint_state
         node._publish = timed_publish
 
     def dump(self) -> dict[str, Any]:

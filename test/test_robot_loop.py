@@ -10,7 +10,7 @@ import pytest
 
 from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.baselines import PD, PdGains
-from apc_feedback.robot_loop import START_RESEND_SAMPLES, CommandMap, RobotLoop
+from apc_feedback.robot_loop import NOTHING, START_RESEND_SAMPLES, CommandMap, RobotLoop
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_plant_sim.robot_offline import Latency, run_robot_loop
 from apc_plant_sim.scenario import recommended_settings
@@ -60,21 +60,53 @@ def test_command_map_orders_and_clips_per_joint():
 def test_activation_is_a_start_and_the_law_runs_when_its_setpoint_arrives():
     loop, counts, _ = _loop()
     t = 100 * T + 2 * MS
-    loop.on_joint_state(_state(t - MS, 0.3), t)
+    assert loop.on_joint_state(_state(t - MS, 0.3), t) == NOTHING  # inactive: no sample
     loop.activate(t)
-    step = loop.tick(t)
+    step = loop.on_joint_state(_state(t + MS, 0.3), t + MS + 200_000)  # locks the phase, 3 ms
     assert step.start and step.sample.stamp_ns == 100 * T and step.command is None
     # a set point from the plan before the start is dropped, the flagged one is used
     assert loop.on_setpoint(_setpoint(100, 9.0), start=False).command is None
     assert counts["superseded_setpoints"] == 1
     step = loop.on_setpoint(_setpoint(100, 0.3, u_n=1.5), start=True)
     assert step.command.tolist() == [1.5, 1.5] and step.sample is None
-    # set point 101 is in hand before tick 101: the command goes out at the tick
-    assert loop.on_setpoint(_setpoint(101, 0.4, u_n=1.0), start=False) == (None, False, None)
-    loop.on_joint_state(_state(t + 5 * MS, 0.3), t + 5 * MS)
-    step = loop.tick(t + T)
+    # set point 101 is in hand before state 101: the command goes out in that state's callback
+    assert loop.on_setpoint(_setpoint(101, 0.4, u_n=1.0), start=False) == NOTHING
+    step = loop.on_joint_state(_state(101 * T + 3 * MS, 0.3), 101 * T + 3 * MS + 200_000)
     assert not step.start and step.sample.stamp_ns == 101 * T
     assert step.command == pytest.approx([1.0 + 10.0, 1.0 + 10.0])  # kp * 0.1
+
+
+def test_the_command_of_sample_k_leaves_in_the_callback_of_its_state():
+    """A 1 kHz driver: the states at the samples' times give the sample and its command at
+    once, the nine between them nothing; the command's state is the sample's."""
+    loop, counts, _ = _loop()
+    phase = 4 * MS
+    loop.activate(100 * T)
+    law_positions = []
+    update = loop.law.update
+    loop.law.update = lambda k, q, *a: law_positions.append((k, q[0])) or update(k, q, *a)
+    commands = []
+    for i in range(50):
+        t = 100 * T + phase + i * MS
+        step = loop.on_joint_state(_state(t, 0.001 * i), t + 100_000)
+        if step.start:
+            loop.on_setpoint(_setpoint(100, 0.0), start=True)
+            for k in range(101, 106):
+                loop.on_setpoint(_setpoint(k, 0.0), start=False)
+        elif step.command is not None:
+            assert step.sample.stamp_ns + phase == t  # the sample is this state, as it is
+            commands.append(t)
+            assert loop.command_state_ns == t
+            loop.command_published(t + 150_000)
+        else:
+            assert step == NOTHING
+    assert commands == [100 * T + phase + k * T for k in range(1, 5)]
+    assert law_positions[1:] == [(100 + k, 0.001 * 10 * k) for k in range(1, 5)]
+    figures = loop.timing.figures()
+    assert figures["state_to_command_max_us"] == 150.0  # the start's command was not reported
+    assert figures["state_age_median_us"] == 100.0 and figures["carry_max_us"] == 0.0
+    assert figures["sample_phase_max_us"] == 4000.0 and figures["driver_period_max_us"] == 1000.0
+    assert counts["samples_taken"] == 5 and counts["commands"] == 5
 
 
 def test_a_start_without_an_answer_is_sent_again_from_the_sample_then():
@@ -82,106 +114,109 @@ def test_a_start_without_an_answer_is_sent_again_from_the_sample_then():
     # resend the loop would wait for its set point for ever and never command.
     loop, counts, _ = _loop()
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.3), t)
     loop.activate(t)
-    assert loop.tick(t).start
+    assert loop.on_joint_state(_state(t, 0.3), t).start
     for i in range(1, START_RESEND_SAMPLES):
-        loop.on_joint_state(_state(t + i * T, 0.3), t + i * T)
-        step = loop.tick(t + i * T)
+        step = loop.on_joint_state(_state(t + i * T, 0.3), t + i * T)
         assert not step.start and step.command is None
     k = 100 + START_RESEND_SAMPLES
-    loop.on_joint_state(_state(k * T, 0.4), k * T)
-    step = loop.tick(k * T)
+    step = loop.on_joint_state(_state(k * T, 0.4), k * T)
     assert step.start and step.sample.stamp_ns == k * T and counts["start_resends"] == 1
     # an answer to the first start arriving now is from a superseded start
     assert loop.on_setpoint(_setpoint(100, 0.3), start=True).command is None
     assert loop.on_setpoint(_setpoint(k, 0.4, u_n=2.0), start=True).command.tolist() == [2.0, 2.0]
 
 
-def test_a_tick_without_a_new_state_takes_no_sample_and_the_law_skips_across_the_gap():
+def test_a_lost_state_leaves_a_gap_the_law_skips_across():
     law_calls = []
     loop, counts, _ = _loop()
     update = loop.law.update
     loop.law.update = lambda k, *a: law_calls.append(k) or update(k, *a)
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.0), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.0), t)
     loop.on_setpoint(_setpoint(100, 0.0), start=True)
     for k in (101, 102, 103):
         loop.on_setpoint(_setpoint(k, 0.0), start=False)
-    assert loop.tick(t + T) == (None, False, None)  # no new state
-    assert counts["no_new_state"] == 1
-    loop.on_joint_state(_state(t + T + MS, 0.0), t + T + MS)
-    assert loop.tick(t + 2 * T).command is not None
+    # the state of sample 101 is lost (a 100 Hz driver: nothing else is near its time)
+    assert loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T).command is not None
+    assert counts["missed_samples"] == 1
     assert law_calls == [100, 102]
 
 
 def test_late_duplicate_and_missing_setpoints_are_counted():
     loop, counts, _ = _loop()
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.0), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.0), t)
     loop.on_setpoint(_setpoint(100, 0.0), start=True)
     loop.on_setpoint(_setpoint(102, 0.0), start=False)
     loop.on_setpoint(_setpoint(102, 1.0), start=False)
     assert counts["duplicate_setpoints"] == 1
     loop.on_setpoint(_setpoint(100, 0.0), start=False)
     assert counts["late_setpoints"] == 1
-    loop.on_joint_state(_state(t + T, 0.0), t + T)
-    assert loop.tick(t + T).command is None  # set point 101 not here yet
-    loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
-    assert loop.tick(t + 2 * T).command is not None
+    assert loop.on_joint_state(_state(t + T, 0.0), t + T).command is None  # 101 not here yet
+    assert loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T).command is not None
     assert counts["missed_setpoint"] == 1
     loop.on_setpoint(_setpoint(101, 0.0), start=False)
     assert counts["late_setpoints"] == 2
 
 
+def test_a_late_setpoints_command_times_from_its_state():
+    loop, _, _ = _loop()
+    t = 100 * T + 5 * MS
+    loop.activate(t)
+    loop.on_joint_state(_state(t, 0.0), t + 300_000)
+    step = loop.on_setpoint(_setpoint(100, 0.0), start=True)
+    assert step.command is not None and loop.command_state_ns == t
+    loop.command_published(t + 2 * MS)
+    assert loop.timing.figures()["state_to_command_median_us"] == 2000.0
+    assert loop.command_state_ns is None
+
+
 def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fresh_states():
     loop, counts, logs = _loop()
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.2), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.2), t)
     loop.on_setpoint(_setpoint(100, 0.2), start=True)
+    assert loop.tick(t + 5 * T) == NOTHING  # 50 ms: still within the watchdog
     step = loop.tick(t + 6 * T)  # 60 ms without a state, watchdog 50 ms
     assert step.command.tolist() == [2.0, 1.0]  # gravity, in command order (b, a)
-    assert counts["watchdog"] == 1 and logs[-1][0] == "error"
-    assert loop.tick(t + 7 * T) == (None, False, None)
-    loop.on_joint_state(_state(t + 8 * T, 0.5), t + 8 * T)
-    step = loop.tick(t + 8 * T)
-    assert step.start and step.sample.position[0] == 0.5
+    assert loop.command_state_ns is None  # a hold computed from no sample: no timing
+    assert counts["watchdog"] == 1 and logs[-1][0] == "error" and loop.faulted
+    assert loop.tick(t + 7 * T) == NOTHING
+    # the driver comes back on another cycle: the phase locks to it afresh
+    step = loop.on_joint_state(_state(t + 8 * T + 7 * MS, 0.5), t + 8 * T + 7 * MS)
+    assert step.start and step.sample.position[0] == 0.5 and step.sample.stamp_ns == 108 * T
+    assert loop.sampler.phase_ns == 7 * MS and not loop.faulted
     assert counts["watchdog_recovered"] == 1 and counts["starts"] == 2
+    assert counts["missed_samples"] == 0  # a restart's gap is no missed sample
 
 
 def test_waiting_for_the_first_state_is_not_a_fault():
     loop, counts, _ = _loop()
     loop.activate(100 * T)
-    assert loop.tick(100 * T) == (None, False, None)
+    assert loop.tick(100 * T) == NOTHING
     assert counts["no_state"] == 1 and counts["watchdog"] == 0
 
 
 def test_path_tolerance_aborts_a_moving_setpoint_and_restarts_at_the_measured_position():
     loop, counts, logs = _loop(tolerance=0.1)
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.0), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.0), t)
     loop.on_setpoint(_setpoint(100, 0.0), start=True)
     loop.on_setpoint(_setpoint(101, 0.05, qd=1.0), start=False)  # within tolerance
-    loop.on_joint_state(_state(t + T, 0.0), t + T)
-    assert loop.tick(t + T).command is not None
+    assert loop.on_joint_state(_state(t + T, 0.0), t + T).command is not None
     # a held (still) set point far away is no path violation; a moving one is
     loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
-    loop.tick(t + 2 * T)
     step = loop.on_setpoint(_setpoint(102, 0.3, qd=1.0), start=False)
-    assert step == (None, False, None)  # no command: the last one stands
+    assert step == NOTHING  # no command: the last one stands
     assert counts["path_tolerance_aborts"] == 1
     assert "joint 'a'" in logs[-1][1]
     # the next sample is a start; set points of the aborted plan are dropped
-    loop.on_joint_state(_state(t + 3 * T, 0.1), t + 3 * T)
-    step = loop.tick(t + 3 * T)
+    step = loop.on_joint_state(_state(t + 3 * T, 0.1), t + 3 * T)
     assert step.start and step.sample.stamp_ns == 103 * T and step.command is None
     assert loop.on_setpoint(_setpoint(104, 0.3, qd=1.0), start=False).command is None
     assert loop.on_setpoint(_setpoint(103, 0.1), start=True).command is not None
@@ -191,12 +226,12 @@ def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
     loop, _, _ = _loop()
     assert loop.deactivate() is None  # never measured: nothing to hold
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.0), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.0), t)
     assert loop.deactivate().tolist() == [2.0, 1.0]
-    assert loop.tick(t + T) == (None, False, None)
-    assert loop.on_setpoint(_setpoint(100, 0.0), start=True) == (None, False, None)
+    assert loop.on_joint_state(_state(t + T, 0.0), t + T) == NOTHING
+    assert loop.tick(t + 10 * T) == NOTHING
+    assert loop.on_setpoint(_setpoint(100, 0.0), start=True) == NOTHING
 
 
 # -- the loop closed offline (apc_plant_sim.robot_offline) -----------------------------------------
@@ -234,9 +269,8 @@ def test_a_failing_law_step_sends_no_command_and_is_counted():
 
     loop.law.update = fail
     t = 100 * T
-    loop.on_joint_state(_state(t, 0.0), t)
     loop.activate(t)
-    loop.tick(t)
+    loop.on_joint_state(_state(t, 0.0), t)
     assert loop.on_setpoint(_setpoint(100, 0.0), start=True).command is None
     assert counts["feedback_law_errors"] == 1 and logs[-1][0] == "error"
 
@@ -252,3 +286,31 @@ def test_closed_loop_stops_the_arm_after_a_watchdog_where_it_is_then():
     assert np.rad2deg(np.max(np.abs(back - q[0]))) > 1.0  # it did sag
     assert np.rad2deg(np.max(np.abs(q[seconds > 0.84] - back))) < 10.0
     assert np.rad2deg(np.ptp(q[seconds > 1.5], axis=0).max()) < 0.05  # at rest
+
+
+def test_closed_loop_runs_the_same_whatever_the_drivers_phase():
+    """Samples lock to the driver's cycle: the delay from a state to its command, and so the
+    run, is the same at any phase of the driver's cycle (a sample timer of its own made it
+    depend on where activation fell)."""
+    errors = [
+        run_robot_loop(1.0, goal_deg=(90.0, 45.0, -135.0), phase_ms=phase).max_tracking_error_deg()
+        for phase in (0.0, 0.3, 1.7, 6.9)
+    ]
+    assert errors[0] < 1.0
+    assert errors == pytest.approx([errors[0]] * 4, rel=1e-9)
+
+
+def test_closed_loop_timing_figures():
+    """500 Hz: the samples are the driver's states (no carry), each command leaves when its
+    state arrives; 333 Hz: carried by at most half a driver period, and the move tracks."""
+    run = run_robot_loop(0.5, driver_ms=2.0, phase_ms=1.3, transport_ms=0.4)
+    f = run.timing
+    assert f["carry_max_us"] == 0.0 and f["driver_period_max_us"] == 2000.0
+    assert f["state_age_median_us"] == f["state_age_max_us"] == 400.0
+    assert f["state_to_command_median_us"] == f["state_to_command_max_us"] == 400.0
+    assert f["sample_phase_max_us"] == pytest.approx(1300.0)
+    assert run.counts["samples_taken"] == 50 and "missed_samples" not in run.counts
+    run = run_robot_loop(2.0, goal_deg=(90.0, 45.0, -135.0), driver_ms=1000.0 / 333)
+    assert 0.0 < run.timing["carry_max_us"] <= 1000.0 / 333 / 2 * 1e3
+    assert "missed_samples" not in run.counts
+    assert run.max_tracking_error_deg() < 0.3

@@ -10,7 +10,9 @@ from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
+    SampleTiming,
     StateRejectedError,
+    TimingWindow,
     VelocityEstimator,
 )
 from apc_feedback.sampling import JointStateSampler
@@ -43,9 +45,10 @@ def _rejected(sampler, state, now) -> str:
     return caught.value.reason
 
 
-def test_it_is_a_joint_state_sampler_that_ticks():
+def test_it_is_a_joint_state_sampler_that_samples_on_arrival():
     s: JointStateSampler = _sampler()
-    assert s.ticking and s.offer(_state(0, 0.0, 0.0), 0) is None
+    assert not s.ticking and s.offer(_state(0, 0.0, 0.0), 0) is None  # not started
+    assert s.tick(0) is None
 
 
 def test_duplicate_out_of_order_stale_and_future_are_rejected():
@@ -63,63 +66,127 @@ def test_duplicate_out_of_order_stale_and_future_are_rejected():
     assert s.newest.position[0] == 0.0
 
 
-def test_samples_are_grid_stamped_from_the_newest_state_carried_forward_to_the_tick():
-    s = _sampler()
-    t0 = 1234 * T + 3 * MS  # activation 3 ms into a period
+def _drive(s, hz, start_ns, seconds, q=lambda t: 0.0, transport_ns=300_000):
+    """A driver at ``hz`` from ``start_ns``: states of position ``q(t)`` without velocity,
+    each offered ``transport_ns`` after its stamp; (stamp, arrival, sample) per state."""
+    dt = round(1e9 / hz)
+    out = []
+    for i in range(round(seconds * hz)):
+        t = start_ns + i * dt
+        out.append((t, t + transport_ns, s.offer(_state(t, q(t)), t + transport_ns)))
+    return out
 
-    def ramp(t):  # q = 1 + 2 (t - t0) + 5 (t - t0)^2, sent without velocity
-        x = (t - t0) * 1e-9
+
+@pytest.mark.parametrize("hz", [100, 200, 500, 1000])  # 4 ms (250 Hz) does not divide 10 ms
+@pytest.mark.parametrize("phase_ns", [0, 1, 300_000, 3_999_999, 9_999_999])
+def test_samples_are_the_drivers_states_when_its_period_divides_t(hz, phase_ns):
+    s = _sampler()
+    start = 1000 * T + phase_ns
+    _drive(s, hz, start - 50 * MS, 0.05)  # states before activation are no samples
+    s.start()
+    states = _drive(s, hz, start, 0.5, q=lambda t: np.sin(1e-9 * t))
+    samples = [(t, sample) for t, _, sample in states if sample is not None]
+    assert s.phase_ns == phase_ns and s.driver_period_ns == round(1e9 / hz)
+    # every state at a sample time kT + phase is sample k, as it is: no extrapolation
+    assert [t for t, _ in samples] == [t for t, _, _ in states if (t - phase_ns) % T == 0]
+    assert len(samples) == 50
+    for t, sample in samples:
+        assert sample.stamp_ns == t - phase_ns
+        assert sample.position[0] == np.sin(1e-9 * t)
+    assert [sample.stamp_ns // T for _, sample in samples] == list(range(1000, 1050))
+    assert s.last.offset_ns == 0 and s.last.missed == 0 and s.last.age_ns == 300_000
+
+
+@pytest.mark.parametrize(
+    ("period", "directions"),
+    [(3_003_003, {-1, 0, 1}), (4 * MS, {-1, 0})],  # 333 Hz; 250 Hz: a tie takes the earlier
+)
+@pytest.mark.parametrize("phase_ns", [0, 1_234_567, 7_000_000])
+def test_other_drivers_samples_are_t_apart_carried_from_the_nearest_state(
+    period, directions, phase_ns
+):
+    s = _sampler()
+
+    def ramp(t):  # a constant acceleration: the parabola carries it exactly
+        x = (t - 1000 * T) * 1e-9
         return 1.0 + 2.0 * x + 5.0 * x * x
 
-    s.offer(_state(t0 - 2 * MS, ramp(t0 - 2 * MS)), t0)
-    s.offer(_state(t0 - 1 * MS, ramp(t0 - 1 * MS)), t0)
-    k0 = s.start(t0)
-    assert k0 == 1234
-    s.tick(t0)  # two states: carried forward by their slope to t0
-    take = s.last
-    assert take.k == 1234 and take.sample.stamp_ns == 1234 * T
-    assert take.age_ns == 1 * MS and take.missed == 0 and take.reason == ""
-    slope = (ramp(t0 - MS) - ramp(t0 - 2 * MS)) / 1e-3
-    assert take.sample.position[0] == pytest.approx(ramp(t0 - MS) + 1e-3 * slope)
-    # two states within the next period: the newer one is taken, carried forward exactly
-    s.offer(_state(t0 + 4 * MS, ramp(t0 + 4 * MS)), t0 + 4 * MS)
-    s.offer(_state(t0 + 8 * MS, ramp(t0 + 8 * MS)), t0 + 8 * MS)
-    s.tick(t0 + T + 1 * MS)  # timer 1 ms late: still sample k0 + 1, at its own time
-    take = s.last
-    assert take.k == k0 + 1 and take.age_ns == 3 * MS and take.late_ns == 1 * MS
-    assert take.sample.position[0] == pytest.approx(ramp(t0 + T))
-    assert take.sample.velocity[0] == pytest.approx(2.0 + 10.0 * 0.010)
+    _drive(s, 1e9 / period, 1000 * T + phase_ns - 30 * MS, 0.03, q=ramp)
+    s.start()
+    states = _drive(s, 1e9 / period, 1000 * T + phase_ns, 0.5, q=ramp)
+    samples = [(t, sample) for t, _, sample in states if sample is not None]
+    stamps = [sample.stamp_ns for _, sample in samples]
+    assert np.all(np.diff(stamps) == T)  # exactly T apart, no index left out
+    assert len(samples) >= 49
+    sample_phase = s.phase_ns
+    for t, sample in samples:
+        when = sample.stamp_ns + sample_phase
+        assert abs(t - when) <= period // 2 + 1  # the nearest state, carried either way
+        assert sample.position[0] == pytest.approx(ramp(when), abs=1e-12)
+        assert sample.velocity[0] == pytest.approx(2.0 + 10.0 * (when - 1000 * T) * 1e-9)
+    offsets = [t - (sample.stamp_ns + sample_phase) for t, sample in samples]
+    assert {int(np.sign(o)) for o in offsets} == directions  # carried backward and forward
 
 
-def test_no_new_state_stale_and_missed_ticks_leave_gaps():
+def test_jittered_stamps_still_give_one_sample_per_period():
+    """A wall-clock driver's stamps jitter: a state a little early is still the one nearest
+    its sample's time, not a reason to wait a whole driver period."""
+    s = _sampler()
+    rng = np.random.default_rng(1)
+    start = 1000 * T + 3 * MS
+    s.offer(_state(start - 2 * MS, 0.0, 0.0), start - 2 * MS)
+    s.start()
+    taken = []
+    for i in range(400):
+        t = start + i * 2 * MS + int(rng.integers(-100_000, 100_000))
+        if s.offer(_state(t, 0.0, 0.0), t + 200_000) is not None:
+            taken.append((t, s.last))
+    assert [take.k for _, take in taken] == list(range(taken[0][1].k, taken[0][1].k + 80))
+    assert all(abs(take.offset_ns) <= 300_000 for _, take in taken)
+
+
+def test_lost_states_and_a_slow_driver_leave_gaps_counted_as_missed():
     s = _sampler(max_age=0.02)
-    t0 = 500 * T
-    s.offer(_state(t0, 0.0, 0.0), t0)
-    k0 = s.start(t0)
-    assert s.tick(t0) is not None
-    s.tick(t0 + T)  # nothing new since: no sample, nothing reaches a law twice
-    take = s.last
-    assert take.sample is None and take.reason == "no_new_state" and take.k == k0 + 1
-    s.offer(_state(t0 + T + 5 * MS, 0.1, 0.0), t0 + T + 5 * MS)
-    s.tick(t0 + 4 * T)  # two ticks never ran; the state is 25 ms old by now
-    take = s.last
-    assert take.k == k0 + 4 and take.missed == 2 and take.reason == "stale"
-    s.offer(_state(t0 + 5 * T - MS, 0.2, 0.0), t0 + 5 * T)
-    s.tick(t0 + 5 * T + 4 * MS)  # a timer late by less than T keeps the index
-    take = s.last
-    assert take.k == k0 + 5 and take.sample is not None and take.missed == 0
+    t0 = 500 * T + 2 * MS
+    s.offer(_state(t0 - MS, 0.0, 0.0), t0 - MS)
+    s.start()
+    assert s.offer(_state(t0, 0.0, 0.0), t0).stamp_ns == 500 * T
+    for i in range(1, 10):  # the state at sample 501's time is lost: 502 follows
+        state = s.offer(_state(t0 + i * MS, 0.0, 0.0), t0 + i * MS)
+        assert state is None
+    assert s.offer(_state(t0 + 20 * MS, 0.0, 0.0), t0 + 20 * MS).stamp_ns == 502 * T
+    assert s.last.missed == 1 and s.last.offset_ns == 0
+    # a state lost just before its sample's time: the one after it is carried back
+    assert s.offer(_state(t0 + 31 * MS, 0.0, 0.0), t0 + 31 * MS).stamp_ns == 503 * T
+    assert s.last.offset_ns == MS and s.last.missed == 0
+    # a driver at 50 Hz: every other sample time has no state near it
+    s2 = _sampler()
+    s2.offer(_state(t0 - 20 * MS, 0.0, 0.0), t0 - 20 * MS)
+    s2.start()
+    got = [s2.offer(_state(t0 + i * 20 * MS, 0.0, 0.0), t0 + i * 20 * MS) for i in range(4)]
+    assert [g.stamp_ns // T for g in got] == [500, 502, 504, 506]
+    assert s2.last.missed == 1
 
 
-def test_restart_continues_after_the_last_sample():
+def test_restart_continues_after_the_last_sample_and_locks_the_phase_again():
     s = _sampler()
     t0 = 100 * T + 9 * MS
-    s.offer(_state(t0, 0.0, 0.0), t0)
-    k0 = s.start(t0)
-    s.tick(t0)
-    k1 = s.start(t0 + 2 * MS)  # re-activated within the same period: one index left out
-    assert k1 == k0 + 2
-    s.tick(t0 + 2 * MS)
-    assert s.last.k == k1
+    s.offer(_state(t0 - T, 0.0, 0.0), t0 - T)
+    s.start()
+    assert s.offer(_state(t0, 0.0, 0.0), t0).stamp_ns == 100 * T
+    s.stop()
+    assert s.offer(_state(t0 + 2 * MS, 0.0, 0.0), t0 + 2 * MS) is None  # stopped
+    s.start()  # re-started: one index left out, the phase locked afresh (5 ms)
+    t1 = 101 * T + 5 * MS
+    assert s.offer(_state(t1, 0.0, 0.0), t1) is None  # sample 102 is at 102 T + 5 ms
+    assert s.phase_ns == 5 * MS
+    got = s.offer(_state(t1 + T, 0.0, 0.0), t1 + T)
+    assert got.stamp_ns == 102 * T and s.last.offset_ns == 0 and s.last.missed == 0
+    # after a long gap (a watchdog) the first sample is no missed sample either
+    s.start()
+    t2 = t1 + 50 * T + 4 * MS  # 9 ms into a period
+    assert s.offer(_state(t2, 1.0, 0.0), t2).stamp_ns == (t2 // T) * T
+    assert s.last.missed == 0 and s.phase_ns == t2 % T
 
 
 def test_watchdog_is_on_the_newest_accepted_stamp():
@@ -170,13 +237,12 @@ def test_velocity_noise_and_lag_are_as_documented():
 
 def test_the_drivers_velocity_is_used_when_sent_and_estimated_when_not():
     s = _sampler()
-    s.offer(_state(0, 0.0), 0)
-    assert s.newest.velocity is None
-    s.start(0)
-    assert s.tick(0) is None and s.last.reason == "no_velocity"
-    s.offer(_state(5 * MS, 0.01), 5 * MS)
-    assert s.newest.velocity == pytest.approx([2.0])
-    assert s.tick(5 * MS).velocity == pytest.approx([2.0])
+    s.start()
+    assert s.offer(_state(0, 0.0), 0) is None
+    assert s.newest.velocity is None and s.last.reason == "no_velocity"
+    assert s.phase_ns is None  # the phase locks on the first state that can be a sample
+    assert s.offer(_state(5 * MS, 0.01), 5 * MS).velocity == pytest.approx([2.0])
+    assert s.phase_ns == 5 * MS
     s.offer(_state(10 * MS, 0.02, 7.0), 10 * MS)
     assert s.newest.velocity == pytest.approx([7.0])
 
@@ -192,3 +258,38 @@ def test_the_velocity_estimate_starts_afresh_after_a_gap_in_the_states():
     assert s.newest.velocity is None  # no difference across the gap
     s.offer(_state(t + MS, 0.502), t + MS)
     assert s.newest.velocity == pytest.approx([2.0])
+
+
+def test_timing_window_median_p99_and_max():
+    w = TimingWindow(200)
+    for v in range(1, 301):  # the window keeps the last 200: 101 .. 300
+        w.add(v)
+    assert len(w) == 200
+    assert w.figures() == (200.5, 298.0, 300.0)  # nearest rank: the 198th of 200
+    one = TimingWindow(10)
+    one.add(7)
+    assert one.figures() == (7.0, 7.0, 7.0)
+
+
+def test_sample_timing_figures_from_a_333_hz_driver():
+    s = _sampler()
+    timing = SampleTiming(window=1000)
+    period = 3_003_003
+    s.offer(_state(1000 * T + 500_000 - period, 0.0, 0.0), 1000 * T + 500_000 - period)
+    s.start()
+    for i in range(300):
+        t = 1000 * T + 500_000 + i * period
+        arrival = t + 200_000 + (i % 4) * 100_000  # 0.2 .. 0.5 ms on the way
+        if s.offer(_state(t, 0.0, 0.0), arrival) is not None:
+            timing.sampled(s.last, s.phase_ns, s.driver_period_ns)
+            timing.commanded(t, arrival + 50_000)
+    f = timing.figures()
+    assert set(f) == {
+        f"{name}_{figure}_us" for name in SampleTiming.NAMES for figure in ("median", "p99", "max")
+    }
+    assert f["sample_phase_median_us"] == f["sample_phase_max_us"] == 500.0
+    assert f["driver_period_median_us"] == f["driver_period_max_us"] == period * 1e-3
+    assert 200.0 <= f["state_age_median_us"] <= 500.0 and f["state_age_max_us"] == 500.0
+    assert f["state_to_command_max_us"] == 550.0
+    assert f["carry_max_us"] <= period / 2 * 1e-3 and f["carry_median_us"] > 0.0
+    assert SampleTiming().figures() == {}

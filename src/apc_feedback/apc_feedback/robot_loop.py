@@ -1,19 +1,25 @@
 """Robot mode's control loop without ROS: samples, set points, the law, the command, faults.
 
 :class:`RobotLoop` is what the commanding node (``robot_node``) runs; it is told joint
-states, set points and tick times, never reads a clock, and answers with a :class:`Step`: the
+states, set points and times, never reads a clock, and answers with a :class:`Step`: the
 sample to publish for the feedforward, and the command to send, if any.
 
 One sample ``k``:
 
-1. the timer ticks, :class:`~apc_feedback.robot_sampling.RobotSampler` takes sample ``k``
-   (stamped ``kT``) from the newest joint state; it goes out for the feedforward;
+1. the driver's state for the sample's time arrives;
+   :class:`~apc_feedback.robot_sampling.RobotSampler` takes sample ``k`` (stamped ``kT``) from
+   it in :meth:`RobotLoop.on_joint_state`; it goes out for the feedforward;
 2. the feedforward has already sent set point ``k`` (it answers sample ``k - 1`` with set
-   points up to ``k - 1 + lookahead``), so the law runs at once; at a (re)start it arrives
-   after sample ``k``, and the law runs then;
+   points up to ``k - 1 + lookahead``), so the law runs at once and the command goes out in the
+   same callback, a fixed time after the state; at a (re)start the set point arrives after
+   sample ``k``, and the law runs then;
 3. the command is ``u_n(k) + du(k)`` in ``command_joints`` order, clipped to the effort
    limits. The add happens here, where set point and ``du`` both are: no torque message
    between the feedforward and the command.
+
+:meth:`RobotLoop.tick`, called by a timer, is only the watchdog below. The loop keeps the
+sampling's timing (:class:`~apc_feedback.robot_sampling.SampleTiming`, ``timing``); the node
+reports when a command went out (:meth:`RobotLoop.command_published`).
 
 Starts. At activation, after a watchdog fault and after a path-tolerance abort, the sample
 goes out flagged as a *start*: the feedforward drops its plan and queued goals and holds that
@@ -39,13 +45,15 @@ Faults.
 Deactivation sends the same gravity hold once and stops commanding (an inactive controller
 commands nothing: another one may take the joints over).
 
-The driver's rate. A command reaches the arm at the driver's next write after it arrives, so
-the torque computed from a state is applied an age plus up to one driver period later, and
-that delay moves from sample to sample when T is not a whole number of driver periods. Eq. 16
-has no such delay. Measured with this loop closed around apc's plant (the PUMA, 5 lb payload,
-recommended preset, ``test/test_robot_loop.py``): drivers at 1 kHz, 500, 400 and 333 Hz hold
-within 0.23 deg; at 250, 200 or 100 Hz the adaptive law diverges. Run the driver
-(ros2_control's ``update_rate``) at 500 Hz or more.
+The driver's rate. A command reaches the arm at the driver's next write after it arrives: the
+samples are the driver's states and the command leaves in the state's callback, so the torque
+computed from a state is applied one driver period (plus the command's trip) after it, the
+same delay at every sample and in every run. Eq. 16 has no such delay. Measured with this loop
+closed around apc's plant (the PUMA, 5 lb payload, recommended preset, the paper's move,
+``apc_plant_sim.robot_offline``, states 0.3 ms on the way): drivers at 1 kHz, 500, 400 and
+333 Hz track within 0.23 deg, 250 Hz within 9 deg; at 200 and 100 Hz (a torque applied 5 or
+10 ms after its state) the adaptive law diverges. Run the driver (ros2_control's
+``update_rate``) at 500 Hz or more.
 """
 
 from __future__ import annotations
@@ -58,7 +66,7 @@ import numpy as np
 
 from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.controller import FeedbackLaw
-from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
+from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 
 #: Samples a start waits for the set point that answers it before it is sent again: a start
 #: published before the feedforward's subscription matched (DDS discovery) is lost, and without
@@ -176,72 +184,84 @@ class RobotLoop:
         self._pending: JointSample | None = None  # sample waiting for its set point
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self._taken_stamp: int | None = None  # stamp of the newest sample taken
-        self.last_age_ns = -1  # age of the state the last tick sampled (-1: none)
-        self.last_late_ns = 0  # how late the last tick was after its sample's time
+        self._pending_state_ns = -1  # driver stamp of the pending sample's state
+        self.command_state_ns: int | None = None  # that of the newest law command, unreported
+        self.timing = SampleTiming()
 
     # -- inputs ---------------------------------------------------------------------------------
-    def on_joint_state(self, state: JointSample, now_ns: int) -> None:
-        """A validated joint state (model order); raises
+    def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
+        """A validated joint state (model order) arriving at ``now``: sample ``k`` if it is the
+        state for one, and its command if set point ``k`` is here. Raises
         :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be sampled."""
-        self.sampler.offer(state, now_ns)
-
-    def activate(self, now_ns: int) -> None:
-        """Start sampling at ``now`` with a start (hold the measured position)."""
-        self.sampler.start(now_ns)
-        self.active, self.faulted, self._restart = True, False, True
-        self._pending = None
-
-    def deactivate(self) -> np.ndarray | None:
-        """Stop; the last command (gravity hold at the newest position), None without one."""
-        self.active = False
-        self._pending, self._start_stamp = None, None
-        self._setpoints.clear()
-        return self._hold_command()
-
-    def tick(self, now_ns: int) -> Step:
-        """One timer call at ``now``: take sample ``k``, run the law if its set point is here."""
-        if not self.active:
-            return NOTHING
-        if not self.sampler.fresh(now_ns):
-            self.sampler.tick(now_ns)  # keeps k moving through the fault
-            if self.sampler.newest is None:
-                self.count("no_state")  # nothing measured yet: wait, not a fault
-                return NOTHING
-            if self.faulted:
-                return NOTHING
-            self.faulted, self._pending = True, None
-            self.count("watchdog")
-            self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
-            return Step(command=self._hold_command())
-        self.sampler.tick(now_ns)
-        take = self.sampler.last
-        self.last_age_ns, self.last_late_ns = take.age_ns, take.late_ns
+        sampler = self.sampler
+        sample = sampler.offer(state, now_ns)
+        take = sampler.last
+        if not self.active or take is None or take.state_ns != state.stamp_ns:
+            return NOTHING  # not sampling, or no sample time near this state
         if take.missed:
-            self.count("missed_ticks")
-        if self._pending is not None:
-            self.count("missed_setpoint")  # sample k - 1 got no set point before tick k
-            self._pending = None
-        if take.sample is None:
+            self.count("missed_samples")
+        if sample is None:
             self.count(take.reason)
             return NOTHING
+        assert sampler.phase_ns is not None
+        self.timing.sampled(take, sampler.phase_ns, sampler.driver_period_ns)
+        if self._pending is not None:
+            self.count("missed_setpoint")  # sample k - 1 got no set point before sample k
+            self._pending = None
         self.count("samples_taken")
-        self._taken_stamp = take.sample.stamp_ns
+        self._taken_stamp = sample.stamp_ns
+        self._pending_state_ns = take.state_ns
         if self.faulted:
             self.faulted, self._restart = False, True
             self.count("watchdog_recovered")
             self.log("warn", f"sample {take.k}: joint states back; holding the measured position")
         if self._restart:
-            return self._start(take.sample)
+            return self._start(sample)
         waiting = self._start_stamp is not None
-        if (
-            waiting
-            and take.sample.stamp_ns - self._start_stamp >= START_RESEND_SAMPLES * self.period_ns
-        ):
+        if waiting and sample.stamp_ns - self._start_stamp >= START_RESEND_SAMPLES * self.period_ns:
             self.count("start_resends")
-            return self._start(take.sample)
-        self._pending = take.sample
-        step = self._try()
-        return step if step.start else step._replace(sample=take.sample)
+            return self._start(sample)
+        self._pending = sample
+        step = self._law_step()
+        return step if step.start else step._replace(sample=sample)
+
+    def activate(self, now_ns: int) -> None:
+        """Start sampling with a start (hold the measured position); the first state that
+        arrives locks the samples' phase to the driver's cycle."""
+        self.sampler.start()
+        self.active, self.faulted, self._restart = True, False, True
+        self._pending = None
+
+    def deactivate(self) -> np.ndarray | None:
+        """Stop; the last command (gravity hold at the newest position), None without one."""
+        self.sampler.stop()
+        self.active, self.command_state_ns = False, None
+        self._pending, self._start_stamp = None, None
+        self._setpoints.clear()
+        return self._hold_command()
+
+    def tick(self, now_ns: int) -> Step:
+        """The watchdog at ``now`` (a timer calls it): no accepted state within ``watchdog`` ->
+        the gravity hold once (a fault); the samples' phase locks afresh when states return."""
+        if not self.active or self.sampler.fresh(now_ns):
+            return NOTHING
+        if self.sampler.newest is None:
+            self.count("no_state")  # nothing measured yet: wait, not a fault
+            return NOTHING
+        if self.faulted:
+            return NOTHING
+        self.faulted, self._pending, self.command_state_ns = True, None, None
+        self.sampler.start()  # the driver may come back on another cycle
+        self.count("watchdog")
+        self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
+        return Step(command=self._hold_command())
+
+    def command_published(self, now_ns: int) -> None:
+        """The node published the step's command at ``now``: the state-to-command time of the
+        newest law command (a gravity hold has no state)."""
+        if self.command_state_ns is not None:
+            self.timing.commanded(self.command_state_ns, now_ns)
+            self.command_state_ns = None
 
     def on_setpoint(self, setpoint: SetpointStamped, start: bool) -> Step:
         """A validated set point (model order); ``start`` if it answers a start sample."""
@@ -261,9 +281,17 @@ class RobotLoop:
         self._setpoints[stamp] = setpoint
         if len(self._setpoints) > 32:  # bounded: a feedforward far ahead is not followed
             del self._setpoints[min(self._setpoints)]
-        return self._try()
+        return self._law_step()
 
     # -- the loop -------------------------------------------------------------------------------
+    def _law_step(self) -> Step:
+        """:meth:`_try`, noting the state a command is computed from."""
+        state_ns = self._pending_state_ns
+        step = self._try()
+        if step.command is not None:
+            self.command_state_ns = state_ns
+        return step
+
     def _start(self, sample: JointSample) -> Step:
         """Send ``sample`` as a start; its set point arrives later."""
         self._restart = False

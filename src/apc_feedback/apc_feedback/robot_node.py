@@ -10,29 +10,39 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
 - ``configure`` loads the model, checks every parameter (a bad one fails the transition with
   one line naming it) and subscribes ``/joint_states`` (a driver's, any rate and joint order,
   extra joints ignored, velocity estimated when empty);
-- ``activate`` starts the sample clock: every T (the node clock: ``use_sim_time`` is honoured)
-  sample k is taken from the newest joint state, stamped kT, and sent on ``feedback/sample``
-  to the feedforward (``feedforward_node`` with ``mode: robot``), which answers with set point
-  k + lookahead on ``feedforward/setpoint``. The first sample holds the measured position, goals
-  on ``feedforward/trajectory`` are then tracked from it. The command ``u_n(k) + du(k)`` goes out
-  as ``std_msgs/Float64MultiArray`` on ``command_topic`` in ``command_joints`` order, clipped to
-  the URDF's effort limits, with the QoS forward_command_controller subscribes with
-  (``SystemDefaultsQoS``);
+- ``activate`` starts sampling in step with the driver: the first joint state locks the
+  samples' phase to the driver's cycle, and sample k is taken in the callback of the driver's
+  state for the time kT + phase (the nearest one, carried to that time when the driver's period
+  does not divide T), stamped kT, and sent on ``feedback/sample`` to the feedforward
+  (``feedforward_node`` with ``mode: robot``), which answers with set point k + lookahead on
+  ``feedforward/setpoint``. The first sample holds the measured position, goals on
+  ``feedforward/trajectory`` are then tracked from it. The command ``u_n(k) + du(k)`` goes out
+  in the same callback (set point k is already here) as ``std_msgs/Float64MultiArray`` on
+  ``command_topic`` in ``command_joints`` order, clipped to the URDF's effort limits, with the
+  QoS forward_command_controller subscribes with (``SystemDefaultsQoS``);
 - ``deactivate`` sends one command holding the arm against gravity at the measured position
   (the controller's model) and then none: forward_command_controller keeps applying the last
   command it got, and an inactive controller must leave the joints to whoever takes them over;
 - ``cleanup`` drops the model and the subscriptions, ``shutdown`` does the same from any state
   (sending the gravity hold first if active).
 
-Faults (counted and on ``/diagnostics``): no fresh joint state within ``watchdog`` -> the
-gravity hold once, then silence until states return (then a fresh hold at the measured
-position); tracking error beyond ``path_tolerance`` while a goal moves -> the goal is aborted
-and the measured position held. See :mod:`apc_feedback.robot_loop` for why.
+Faults (counted and on ``/diagnostics``): no fresh joint state within ``watchdog`` (checked
+every T by a timer on the node clock, which honours ``use_sim_time``) -> the gravity hold
+once, then silence until states return (then a fresh hold at the measured position, the phase
+locked afresh); tracking error beyond ``path_tolerance`` while a goal moves -> the goal is
+aborted and the measured position held. See :mod:`apc_feedback.robot_loop` for why.
+
+Timing on ``/diagnostics`` (median, p99 and max over the last 1000 samples, in us):
+``state_age_*`` (a state's age when its callback runs), ``state_to_command_*`` (its stamp to
+its command's publish), ``sample_phase_*``, ``carry_*`` (how far states are carried to their
+sample's time) and ``driver_period_*`` (estimated from the stamps); see
+:class:`apc_feedback.robot_sampling.SampleTiming`.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import replace
 from typing import Any
 
@@ -61,9 +71,28 @@ from apc_core.params import ConfigError, Param, declare, params_from
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
-from apc_feedback.robot_sampling import RobotSamplingConfig, RobotSamplingError, StateRejectedError
+from apc_feedback.robot_sampling import (
+    RobotSamplingConfig,
+    RobotSamplingError,
+    SampleTiming,
+    StateRejectedError,
+)
 
 AUTOSTART_FLAG = "--autostart"
+
+
+class RobotDiagnostics(Diagnostics):
+    """A node's :class:`Diagnostics` plus robot mode's sample timing (``timing``, when set),
+    refreshed whenever the status is built."""
+
+    timing: SampleTiming | None = None
+
+    def status(self) -> DiagnosticStatus:
+        if self.timing is not None:
+            for key, value in self.timing.figures().items():
+                self.values[key] = f"{value:.1f}"
+        return super().status()
+
 
 PARAMS: tuple[Param, ...] = (
     *CONTROLLER_ROBOT_PARAMS,
@@ -112,7 +141,7 @@ class RobotNode(LifecycleNode):
         super().__init__(node_name, **kwargs)
         preset = declare(self, (PRESET_PARAM,))[PRESET_PARAM.name]
         self._declared = declare(self, preset_rows(PARAMS, preset))
-        self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self.diagnostics = RobotDiagnostics(self.get_fully_qualified_name())
         self.diagnostics.message = "unconfigured"
         DiagnosticsPublisher(self, self.diagnostics)
         self.loop: RobotLoop | None = None
@@ -170,6 +199,7 @@ class RobotNode(LifecycleNode):
             count=diag.count,
             log=self._log,
         )
+        diag.timing = self.loop.timing
         self._sample_msg = JointState()
         self._command_msg = Float64MultiArray()
         qos = wire.CONTROL_QOS
@@ -201,7 +231,8 @@ class RobotNode(LifecycleNode):
         assert self.loop is not None
         self.loop.activate(self._now())
         self._timer = self.create_timer(
-            self.loop.sampling.period, guarded(self, self.diagnostics, "tick", self._on_tick)
+            self.loop.sampling.period,
+            guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog),
         )
         self.diagnostics.message = "active"
         self.get_logger().info("active: holding the measured position until a goal arrives")
@@ -272,11 +303,18 @@ class RobotNode(LifecycleNode):
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
             return
+        started = time.perf_counter()
         try:
-            loop.on_joint_state(sample, self._now())
+            step = loop.on_joint_state(sample, self._now())
         except StateRejectedError as exc:
             self.diagnostics.count(exc.reason)
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+            return
+        if step.sample is not None:  # the law's time: most states are no sample
+            self.diagnostics.time("compute", time.perf_counter() - started)
+        self._publish(step)
+        if step.sample is not None:
+            self._show_state(loop)
 
     def _on_setpoint(self, msg: JointTrajectory) -> None:
         loop = self.loop
@@ -291,17 +329,15 @@ class RobotNode(LifecycleNode):
             step = loop.on_setpoint(setpoint, msg.header.frame_id == wire.START_FRAME)
         self._publish(step)
 
-    def _on_tick(self) -> None:
+    def _on_watchdog(self) -> None:
         loop = self.loop
         if loop is None or not loop.active:
             return
-        with Stopwatch(self.diagnostics, "compute"):
-            step = loop.tick(self._now())
-        self._publish(step)
+        self._publish(loop.tick(self._now()))
+        self._show_state(loop)
+
+    def _show_state(self, loop: RobotLoop) -> None:
         diag = self.diagnostics
-        if loop.last_age_ns >= 0:
-            diag.time("state_age", loop.last_age_ns * 1e-9)
-            diag.time("tick_late", loop.last_late_ns * 1e-9)
         diag.level = DiagnosticStatus.ERROR if loop.faulted else DiagnosticStatus.OK
         diag.message = "watchdog: no fresh joint state" if loop.faulted else "active"
 
@@ -310,6 +346,8 @@ class RobotNode(LifecycleNode):
         if step.command is not None:
             self._command_msg.data = step.command.tolist()
             self.command_pub.publish(self._command_msg)
+            assert self.loop is not None
+            self.loop.command_published(self._now())
         sample = step.sample
         if sample is not None:
             msg = wire.arrays_to_joint_state(

@@ -1,34 +1,39 @@
-"""Robot mode's sampling: the controllers own the sample clock, the driver sends what it sends.
+"""Robot mode's sampling: sample ``k`` is taken when the driver's state for its instant arrives.
 
 A ros2_control driver (``joint_state_broadcaster``) stamps ``/joint_states`` with its own
-clock at its own rate. Here sample ``k`` is *taken* by the controllers' timer, at time
-``kT + phase`` on the node clock, from the newest joint state, and stamped ``kT``: samples stay
-on apc's grid in absolute time, so the feedforward and the feedback law see the same sample
+clock at its own rate. Sample ``k`` belongs to the time ``kT + phase`` and is stamped ``kT``:
+samples stay on apc's grid, so the feedforward and the feedback law see the same sample
 indices as with apc's plant. Everything is told times in nanoseconds, never reads a clock.
 
-The sample is the newest state carried to the sample's time ``kT + phase`` (the tick's
-nominal time): ``q + v a + acc a^2 / 2`` and ``v + acc a`` over ``a`` = that time minus the
-state's stamp (velocity and acceleration from the parabola below; with fewer than three
-states, ``q + v a``). Samples are then exactly T apart whatever the driver's rate and phase
-and the timer's jitter, which Eq. 16 assumes: measured with the loop closed around apc's
-plant (``test/test_robot_loop.py``), the newest state as it is lets the adaptive law diverge
-with a 333 Hz driver (samples 9 or 12 ms apart), carried forward it holds within 0.2 deg; and
-over DDS a late tick followed by a punctual one (two samples 1.4 ms apart, stamped T apart)
-made it diverge at activation.
+Taken on arrival. At :meth:`RobotSampler.start` (activation, a watchdog's recovery) the phase
+locks to the driver's cycle: the first state's stamp modulo ``T``. Sample ``k`` is the state
+nearest ``kT + phase``: the first one stamped at or after ``kT + phase - P / 2`` (``P`` the
+driver's period, the median of its recent stamp intervals), taken in that state's callback, so
+the command computed from it leaves at once and always the same time after the state. A driver
+whose period divides ``T`` (100, 250, 500, 1000 Hz at 10 ms) has a state at every sample time:
+the samples are its states exactly. Otherwise (333 Hz) the state is carried to the sample's
+time, backward or forward by at most ``P / 2``: ``q + v a + acc a^2 / 2`` and ``v + acc a`` over
+``a`` = sample time minus the state's stamp (velocity and acceleration from the parabola below;
+with fewer than three states, ``q + v a``), so samples stand exactly ``T`` apart, which Eq. 16
+assumes. There is no sample timer: one of its own would take sample ``k`` at an arbitrary
+phase of the driver's cycle, the delay from a state to its command would then differ between
+runs by up to a driver period, and with it the adaptive law loses the arm in some runs.
 
 Rules (each counted by the caller under the reason's name):
 
 - ``duplicate``: a state with the stamp of the newest accepted one (the first one stands);
 - ``out_of_order``: a state older than the newest accepted one;
-- ``stale``: a state older than ``max_age`` when it arrives, or when a tick would take it;
+- ``stale``: a state older than ``max_age`` when it arrives;
 - ``future``: a state stamped more than ``max_age`` ahead of the node clock (the driver's and
   the controllers' clocks disagree: same machine, or synchronised by PTP/chrony, is required);
-- ``no_new_state``: a tick finds no state newer than the one the last sample was taken from;
-  no sample is taken, so nothing reaches a law twice;
-- ``missed_ticks``: ticks that did not run at all (a late timer), seen as a jump of ``k``.
+- ``missed_samples``: sample times no state came near (states lost, a driver slower than
+  ``1/T``), seen as a jump of ``k``;
+- ``no_velocity``: the state for a sample has no velocity (the driver sends none and the
+  estimate has a single position after a gap): no sample.
 
-Both the last two leave a gap in ``k``; the adaptive law skips its identification step across
-a gap (Eq. 16 describes a one-period transition).
+The last two leave a gap in ``k``; the adaptive law skips its identification step across a
+gap (Eq. 16 describes a one-period transition). Without states the sampler takes nothing; the
+caller's watchdog (:meth:`RobotSampler.fresh`) notices.
 
 Velocity, when the driver sends none (``velocity`` empty), is estimated from the driver's
 positions: the parabola through the newest state, the newest one at least ``velocity_window``
@@ -151,46 +156,54 @@ class VelocityEstimator:
 
 
 class Take(NamedTuple):
-    """What one tick of :meth:`RobotSampler.tick` gives.
+    """The newest sample :meth:`RobotSampler.offer` took, or why the state for one gave none.
 
     Attributes
     ----------
     k : int
-        Index of this tick's sample (stamp ``kT``).
+        The sample's index (stamp ``kT``).
     sample : JointSample or None
-        The sample, stamped ``kT``: position and velocity carried forward to the tick, the
-        driver's effort (or None); None if none was taken (``reason`` says why).
+        The sample, stamped ``kT``: position and velocity carried to ``kT + phase``, the
+        driver's effort (or None); None if the state could not be one (``reason`` says why).
+    state_ns : int
+        Driver stamp of the state the sample is taken from.
     age_ns : int
-        Age at the tick of the joint state the sample is (or would be) taken from; -1
-        without one.
-    late_ns : int
-        How late the tick is after the sample's nominal time ``kT + phase``.
-    reason : str
-        Why no sample was taken (``no_new_state``, ``stale``, ``no_state``), else "".
+        That state's age when it arrived (``now`` minus its stamp).
+    offset_ns : int
+        The state's stamp minus the sample's time ``kT + phase`` (0 when the driver's period
+        divides ``T``; the state is carried back by it).
     missed : int
-        Ticks skipped since the previous one (a late timer).
+        Sample times skipped since the previous sample (no state came near them).
+    reason : str
+        Why no sample was taken (``no_velocity``), else "".
     """
 
     k: int
     sample: JointSample | None
+    state_ns: int
     age_ns: int
-    reason: str
+    offset_ns: int
     missed: int
-    late_ns: int = 0
+    reason: str = ""
+
+
+#: Stamp intervals the driver's period is the median of: robust to a lost state or a late cycle.
+PERIOD_INTERVALS = 15
 
 
 class RobotSampler:
-    """Samples a driver's joint states on the controllers' clock (see the module docstring).
+    """Samples a driver's joint states as they arrive (see the module docstring).
 
     The robot implementation of :class:`apc_feedback.sampling.JointStateSampler`:
-    :meth:`offer` every joint state as it arrives (it keeps the newest, returns None and
-    raises :class:`StateRejectedError` for one that cannot be sampled), :meth:`start` at
-    activation, :meth:`tick` on every timer call (the sample due, or None; :attr:`last` says
-    which sample, how old its state was and why none was taken). The newest state is kept
-    across :meth:`start` (a re-activation samples the position the arm has then).
+    :meth:`offer` every joint state as it arrives; once started (:meth:`start`) it returns the
+    sample the state is, else None (:attr:`last` says which sample, how old its state was and
+    why none was taken), and raises :class:`StateRejectedError` for one that cannot be sampled.
+    :meth:`stop` ends sampling; states are still taken in (the velocity estimate and the
+    driver's period keep up), and the newest one is kept across :meth:`start` (a re-activation
+    samples the position the arm has then).
     """
 
-    ticking = True
+    ticking = False
 
     def __init__(self, config: RobotSamplingConfig) -> None:
         self.config = config
@@ -200,13 +213,18 @@ class RobotSampler:
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
         self._acceleration: np.ndarray | None = None  # of the newest state, when known
-        self._taken_stamp: int | None = None  # driver stamp of the last sample's state
-        self._phase_ns = 0
+        self._intervals: deque[int] = deque(maxlen=PERIOD_INTERVALS)
+        self.driver_period_ns = 0  # median stamp interval; 0 before two states
+        self.sampling = False
+        self.phase_ns: int | None = None  # locked by the first state after start()
+        self._next_k = 0  # the lowest index the next sample may have
         self._last_k: int | None = None
-        self.last = Take(-1, None, -1, "no_state", 0)  # what the newest tick did
+        self._started = False  # no sample since start(): its gap in k is no missed sample
+        self.last: Take | None = None  # the newest sample taken (or refused for a reason)
 
-    def offer(self, state: JointSample, now_ns: int) -> None:
-        """Take in a validated joint state (finite, in model order); never a sample by itself.
+    def offer(self, state: JointSample, now_ns: int) -> JointSample | None:
+        """Take in a validated joint state (finite, in model order) arriving at ``now``: the
+        sample it is, or None (not sampling, or no sample time near it yet).
 
         Raises
         ------
@@ -234,68 +252,144 @@ class RobotSampler:
                 "future",
             )
         assert state.position is not None
-        if newest is not None and stamp - newest.stamp_ns > self.max_age_ns:
-            # After a gap in the states a parabola through positions from before it is no
-            # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
-            self.velocity.reset()
+        if newest is not None:
+            if stamp - newest.stamp_ns > self.max_age_ns:
+                # After a gap in the states a parabola through positions from before it is no
+                # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
+                self.velocity.reset()
+            else:
+                self._intervals.append(stamp - newest.stamp_ns)
+                self.driver_period_ns = int(np.median(self._intervals))
         velocity = self.velocity.update(stamp, state.position)
         self._acceleration = self.velocity.acceleration
         if state.velocity is not None:
             velocity = state.velocity
         self.newest = JointSample(stamp, state.position, velocity, state.effort)
-        return None
+        if not self.sampling:
+            return None
+        return self._take(now_ns)
 
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""
         return self.newest is not None and now_ns - self.newest.stamp_ns <= self.watchdog_ns
 
-    def start(self, now_ns: int) -> int:
-        """Start sampling at this tick: its sample is ``k = floor(now / T)``; returns it.
+    def start(self) -> None:
+        """Start sampling: the next state that can be a sample locks the phase and is one.
 
-        The ticks' phase within the period is fixed here, so a timer late by less than ``T``
-        keeps consecutive indices; the samples after a re-start come after the ones before it,
-        with at least one index left out.
+        Its index is its stamp's ``floor(stamp / T)``; the samples after a re-start come after
+        the ones before it with at least one index left out (the law takes no step across).
         """
-        k = now_ns // self.period_ns
-        if self._last_k is not None:
-            k = max(k, self._last_k + 2)  # a gap: the law takes no step across a restart
-        self._phase_ns = now_ns - k * self.period_ns
-        self._last_k = k - 1
-        return k
+        self.sampling, self._started = True, True
+        self.phase_ns = None
+        self._next_k = 0 if self._last_k is None else self._last_k + 2
 
-    def tick(self, now_ns: int) -> JointSample | None:
-        """Sample ``k``, the one due at ``now``: the newest joint state carried to the sample's
-        time; None if none can be taken (:attr:`last` says why)."""
-        self.last = self._take(now_ns)
-        return self.last.sample
+    def stop(self) -> None:
+        """Stop sampling (states are still taken in)."""
+        self.sampling = False
 
-    def _take(self, now_ns: int) -> Take:
-        assert self._last_k is not None, "start() first"
-        # Floor: a timer is late, never early; a tick up to T late keeps its index (rounding
-        # would name a late tick after the next sample, and every later one a sample ahead).
-        k = max((now_ns - self._phase_ns) // self.period_ns, self._last_k + 1)
-        missed = k - self._last_k - 1
-        self._last_k = k
+    def tick(self, now_ns: int) -> None:
+        """Never due: samples are taken on arrival (:class:`JointStateSampler`'s protocol)."""
+        return None
+
+    def _take(self, now_ns: int) -> JointSample | None:
         newest = self.newest
-        if newest is None:
-            return Take(k, None, -1, "no_state", missed)
-        age = now_ns - newest.stamp_ns
-        if newest.stamp_ns == self._taken_stamp:
-            return Take(k, None, age, "no_new_state", missed)
-        if age > self.max_age_ns:
-            return Take(k, None, age, "stale", missed)
-        if newest.velocity is None:  # a single position without velocity: nothing to difference
-            return Take(k, None, age, "no_velocity", missed)
-        self._taken_stamp = newest.stamp_ns
-        # Carried to the sample's own time kT + phase, not to ``now``: a late tick and the
-        # one after it still give samples T apart.
+        assert newest is not None
+        stamp, period = newest.stamp_ns, self.period_ns
+        if self.phase_ns is None:
+            if newest.velocity is None:  # a single position: nothing to carry it with
+                self.last = Take(stamp // period, None, stamp, now_ns - stamp, 0, 0, "no_velocity")
+                return None
+            self.phase_ns = stamp % period
+            self._next_k = max(self._next_k, stamp // period)
+        phase = self.phase_ns
+        # The sample time nearest the stamp, never one already passed.
+        k = max((stamp - phase + period // 2) // period, self._next_k)
+        offset = stamp - (k * period + phase)
+        if 2 * offset < -self.driver_period_ns:
+            return None  # the driver's next state is nearer sample k's time
+        missed = 0 if self._started else k - self._next_k
+        self._next_k = k + 1
+        if newest.velocity is None:
+            self.last = Take(k, None, stamp, now_ns - stamp, offset, missed, "no_velocity")
+            return None
+        self._last_k, self._started = k, False
         position, velocity = newest.position, newest.velocity
-        a = (k * self.period_ns + self._phase_ns - newest.stamp_ns) * 1e-9
-        acceleration = self._acceleration
-        if acceleration is None:
-            position = position + a * velocity
-        else:
-            position = position + a * velocity + (0.5 * a * a) * acceleration
-            velocity = velocity + a * acceleration
-        sample = JointSample(k * self.period_ns, position, velocity, newest.effort)
-        return Take(k, sample, age, "", missed, now_ns - k * self.period_ns - self._phase_ns)
+        if offset:
+            a = -offset * 1e-9
+            acceleration = self._acceleration
+            if acceleration is None:
+                position = position + a * velocity
+            else:
+                position = position + a * velocity + (0.5 * a * a) * acceleration
+                velocity = velocity + a * acceleration
+        sample = JointSample(k * period, position, velocity, newest.effort)
+        self.last = Take(k, sample, stamp, now_ns - stamp, offset, missed)
+        return sample
+
+
+class TimingWindow:
+    """The last ``size`` values of one figure (ns); median, p99 and max over them.
+
+    p99 is the nearest-rank percentile: a value that occurred, the smallest one that at least
+    99 % of the window does not exceed.
+    """
+
+    def __init__(self, size: int) -> None:
+        self._values: deque[int] = deque(maxlen=size)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def add(self, value_ns: int) -> None:
+        self._values.append(int(value_ns))
+
+    def figures(self) -> tuple[float, float, float]:
+        """(median, p99, max) in ns; the window must hold a value."""
+        ordered = sorted(self._values)
+        n = len(ordered)
+        median = 0.5 * (ordered[(n - 1) // 2] + ordered[n // 2])
+        return median, float(ordered[math.ceil(0.99 * n) - 1]), float(ordered[-1])
+
+
+class SampleTiming:
+    """Robot mode's timing per sample, over the last ``window`` samples (for ``/diagnostics``).
+
+    - ``state_age``: the state's age when its callback ran (its trip from the driver);
+    - ``state_to_command``: the state's stamp to its command's publish (the trip, the wait for
+      a late set point, the law);
+    - ``sample_phase``: the samples' phase within ``T`` (fixed between starts);
+    - ``carry``: how far the state was carried to its sample's time, ``|offset|`` (0 when the
+      driver's period divides ``T``);
+    - ``driver_period``: the driver's period estimated from its stamps when the sample was
+      taken.
+
+    :meth:`figures` gives each as ``<name>_median_us``, ``<name>_p99_us``, ``<name>_max_us``.
+    """
+
+    NAMES = ("state_age", "state_to_command", "sample_phase", "carry", "driver_period")
+
+    def __init__(self, window: int = 1000) -> None:
+        self.windows = {name: TimingWindow(window) for name in self.NAMES}
+
+    def sampled(self, take: Take, phase_ns: int, driver_period_ns: int) -> None:
+        """A sample was taken (``take``), with the sampler's phase and driver period then."""
+        windows = self.windows
+        windows["state_age"].add(take.age_ns)
+        windows["sample_phase"].add(phase_ns)
+        windows["carry"].add(abs(take.offset_ns))
+        windows["driver_period"].add(driver_period_ns)
+
+    def commanded(self, state_ns: int, published_ns: int) -> None:
+        """The command computed from the state stamped ``state_ns`` went out at ``published``."""
+        self.windows["state_to_command"].add(published_ns - state_ns)
+
+    def figures(self) -> dict[str, float]:
+        """Every figure with values, in microseconds."""
+        out: dict[str, float] = {}
+        for name, window in self.windows.items():
+            if len(window):
+                median, p99, largest = window.figures()
+                out[f"{name}_median_us"] = median * 1e-3
+                out[f"{name}_p99_us"] = p99 * 1e-3
+                out[f"{name}_max_us"] = largest * 1e-3
+        return out

@@ -42,13 +42,12 @@ class JointStateSampler(Protocol):
 
     - Grid (:class:`GridSampler`, apc's plant): every joint state is stamped on the grid and
       *is* sample ``k``; :meth:`offer` returns it, :meth:`tick` is never due.
-    - Robot (a driver stamping states with its own clock, at its own rate): :meth:`offer`
-      keeps the newest valid state and returns None; the node calls :meth:`tick` every period
-      (``ticking`` is True), and at the tick of sample ``k`` it returns the newest state
-      restamped ``t0 + kT`` on the node's clock (``t0`` a multiple of ``T`` chosen at
-      activation, so the stamp stays on the grid), or None when there is no fresh state to
-      take (the pairer then sees a gap, which the law skips, as for a lost sample). How old
-      the state was is the sampler's to measure and expose for diagnostics.
+    - Robot (:class:`apc_feedback.robot_sampling.RobotSampler`, a driver stamping states
+      with its own clock, at its own rate): :meth:`offer` returns the state nearest the time
+      ``kT + phase`` (the phase locked to the driver's cycle) carried to that time and
+      restamped ``kT``, None for the states between samples; :meth:`tick` is never due. A
+      sample time without a state is a gap, which the law skips, as for a lost sample. How
+      old the state was is the sampler's to measure and expose for diagnostics.
 
     A state that cannot be a sample (off the grid, negative, older than allowed, a duplicate
     or out of order) raises :class:`apc_core.wire.WireError` from :meth:`offer` with the

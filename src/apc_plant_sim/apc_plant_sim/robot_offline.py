@@ -2,16 +2,19 @@
 
 What :mod:`apc_plant_sim.offline` is for the lockstep wire, this is for robot mode: apc's plant
 stepped by a driver every ``driver_ms`` (it reports positions only, stamped with its time),
-:class:`apc_feedback.robot_loop.RobotLoop` ticking every T with a phase, and a feedforward
-answering each sample with set points up to ``k + 1`` (lookahead 1), all on one synthetic
-clock. A command reaches the driver at its first cycle at or after the tick, plus a latency
-that :class:`Latency` chooses per command: the delay a drive or a network adds, on time or
-late. The 3-joint PUMA 560 with 10 % inertia error in the controllers and a payload they do not
-know. Used by ``test/test_robot_loop.py`` and ``bench/late_commands.py``.
+:class:`apc_feedback.robot_loop.RobotLoop` offered each state ``transport_ms`` after its stamp
+(the trip to the controllers and their wake-up) and taking its samples from them, its
+watchdog checked every T, and a feedforward answering each sample with set points up to
+``k + 1`` (lookahead 1), all on one synthetic clock. A command leaves when its state arrives
+and reaches the driver at its first cycle after that, plus a latency that :class:`Latency`
+chooses per command: the delay a drive or a network adds, on time or late. The 3-joint PUMA
+560 with 10 % inertia error in the controllers and a payload they do not know. Used by
+``test/test_robot_loop.py`` and ``bench/late_commands.py``.
 """
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -65,10 +68,14 @@ class Latency:
 
 @dataclass
 class RobotRun:
-    """One run: the start position and, per driver cycle, (time ns, q, set point q or None)."""
+    """One run: the start position; per driver cycle (time ns, q), with the set point's q
+    appended for the cycles whose state was a sample; the loop's timing figures at the end
+    (:meth:`apc_feedback.robot_sampling.SampleTiming.figures`, us) and its counters."""
 
     q0: np.ndarray
     log: list[tuple]
+    timing: dict[str, float] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def q(self) -> np.ndarray:
@@ -79,7 +86,7 @@ class RobotRun:
         return float(np.rad2deg(np.max(np.abs(self.q - self.q0))))
 
     def max_tracking_error_deg(self) -> float:
-        """Largest |q - q_d| at the ticks, deg."""
+        """Largest |q - q_d| at the samples, deg."""
         return float(max(np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in self.log if len(e) == 3))
 
 
@@ -89,6 +96,7 @@ def run_robot_loop(
     goal_deg: Sequence[float] | None = None,
     driver_ms: float = 2.0,
     phase_ms: float = 0.3,
+    transport_ms: float = 0.3,
     payload_kg: float = 2.268,
     pause: tuple[float, float] | None = None,
     latency: Latency | None = None,
@@ -103,13 +111,16 @@ def run_robot_loop(
     goal_deg : sequence of float, optional
         A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 20 samples after activation.
     driver_ms, phase_ms : float
-        The driver's period and the ticks' phase after a multiple of T (ms).
+        The driver's period and its cycles' phase after a multiple of T (ms).
+    transport_ms : float
+        From a state's stamp to its arrival at the loop (ms): its trip and the controllers'
+        wake-up; the command computed from it leaves then.
     payload_kg : float
         The payload at the wrist centre the controllers do not know.
     pause : (start, end), optional
         Seconds after activation during which the driver publishes no states.
     latency : Latency, optional
-        When commands reach the driver (default: at its next cycle).
+        When commands reach the driver beyond its first cycle after they leave (default: at it).
     settings : mapping, optional
         The adaptive law's settings (default: the recommended preset).
     """
@@ -121,14 +132,17 @@ def run_robot_loop(
     plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
     data = controller.model.createData()
     config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=0.01))
+    counts: dict[str, int] = {}
     loop = RobotLoop(
         law=AdaptiveFeedback(controller.model, config),
         sampling=RobotSamplingConfig(),
         command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=np.full(3, 0.2),
+        count=lambda name: counts.__setitem__(name, counts.get(name, 0) + 1),
     )
     latency = latency or Latency()
+    transport = round(transport_ms * MS)
     ff: list = []  # [Feedforward, next k]
     log: list[tuple] = []
     pending: list[tuple[int, np.ndarray]] = []  # (when the driver applies it, torque)
@@ -154,34 +168,52 @@ def run_robot_loop(
 
     def handle(step: Step, now: int) -> None:
         if step.command is not None:
-            pending.append((now + latency.next_ns(), loop.command.to_model(step.command)))
+            # The driver has run its cycle at ``now`` (if one falls there): the next one applies it.
+            pending.append((now + 1 + latency.next_ns(), loop.command.to_model(step.command)))
             pending.sort(key=lambda arrival: arrival[0])  # the newest arrival is applied
+            loop.command_published(now)
         if step.sample is not None:
             for answer in feedforward(step.sample, step.start):
                 handle(answer, now)
 
-    t_act = 5000 * T_NS + round(phase_ms * MS)
-    t_driver, t_tick = 5000 * T_NS - 40 * MS, t_act
+    # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
+    # driver cycle comes first, then a state's arrival, then the watchdog's check; activation is
+    # the first check.
+    CYCLE, ARRIVAL, WATCHDOG = 0, 1, 2
+    t_act = 5000 * T_NS
     end = t_act + round(duration_s * 1e9)
-    activated = False
-    while min(t_driver, t_tick) < end:
-        if t_driver <= t_tick:
-            while pending and pending[0][0] <= t_driver:
+    events: list[tuple[int, int, int, Any]] = [
+        (5000 * T_NS - 40 * MS + round(phase_ms * MS), CYCLE, 0, None),
+        (t_act, WATCHDOG, 1, None),
+    ]
+    order = 2
+    while events:
+        now, kind, _, payload = heapq.heappop(events)
+        if now >= end:
+            break
+        if kind == CYCLE:
+            while pending and pending[0][0] <= now:
                 torque = pending.pop(0)[1]
-            if not (pause and pause[0] <= (t_driver - t_act) * 1e-9 < pause[1]):
-                loop.on_joint_state(JointSample(t_driver, plant.q.copy(), None, None), t_driver)
-            log.append((t_driver, plant.q.copy()))
+            log.append((now, plant.q.copy()))
+            if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
+                state = JointSample(now, plant.q.copy(), None, None)
+                heapq.heappush(events, (now + transport, ARRIVAL, order, (len(log) - 1, state)))
+                order += 1
             try:
                 plant.step(torque)
             except PlantError:  # the arm is lost: the run ends here
                 break
-            t_driver += dt
+            heapq.heappush(events, (now + dt, CYCLE, order, None))
+        elif kind == ARRIVAL:
+            index, state = payload
+            step = loop.on_joint_state(state, now)
+            handle(step, now)
+            if step.sample is not None and ff:
+                log[index] = (*log[index][:2], ff[0].sample(step.sample.stamp_ns // T_NS).q)
         else:
-            if not activated:
-                loop.activate(t_tick)
-                activated = True
-            handle(loop.tick(t_tick), t_tick)
-            if ff:
-                log[-1] = (*log[-1][:2], ff[0].sample(t_tick // T_NS).q)
-            t_tick += T_NS
-    return RobotRun(q0, log)
+            if not loop.active:
+                loop.activate(now)
+            handle(loop.tick(now), now)
+            heapq.heappush(events, (now + T_NS, WATCHDOG, order, None))
+        order += 1
+    return RobotRun(q0, log, loop.timing.figures(), counts)
