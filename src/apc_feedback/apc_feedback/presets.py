@@ -61,6 +61,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "integral_limit": 0.05,
         "project_g": True,
         "alpha_model": 1e-3,
+        "input_lags": 2,
     }
 
 

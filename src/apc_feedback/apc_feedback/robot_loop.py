@@ -293,7 +293,17 @@ class RobotLoop:
         return step
 
     def _start(self, sample: JointSample) -> Step:
-        """Send ``sample`` as a start; its set point arrives later."""
+        """Send ``sample`` as a start; its set point arrives later.
+
+        A law that models its input's delay (``AdaptiveFeedback`` with ``input_lags``) is told
+        the delay it splits ``Ĝ(0)`` by at its next (re)start: one driver period, measured from
+        the stamps. The command leaves in its state's callback and the driver applies it at its
+        next write (ros2_control's read, update, write cycle); what a drive or the transport
+        add beyond that the identified lags learn.
+        """
+        expect = getattr(self.law, "expect_input_delay", None)
+        if expect is not None and self.sampler.driver_period_ns > 0:
+            expect(self.sampler.driver_period_ns * 1e-9)
         self._restart = False
         self._start_stamp = sample.stamp_ns
         self._setpoints.clear()
