@@ -404,3 +404,19 @@ def test_phase_offsets_the_driver_cycles_and_their_stamps():
 def test_bad_latency_or_phase_names_the_parameter(overrides, param):
     with pytest.raises(DriverError, match=f"^{param}:"):
         _driver(**overrides)
+
+
+@pytest.mark.parametrize(
+    ("next_cycle_ns", "interval_ns"),
+    [
+        (10_700_000, 2_000_000),  # on the phase (0.7 ms after a multiple of 2 ms)
+        (10_710_000, 2_000_000),  # within the tolerance
+        (11_000_000, 1_700_000),  # 0.3 ms late: the interval after it is shortened
+        (11_700_000, 1_000_000),  # 1 ms late (half a period): shortened
+        (12_500_000, 2_200_000),  # 0.2 ms early: lengthened
+    ],
+)
+def test_aligning_interval_puts_the_cycle_after_the_next_on_the_phase(next_cycle_ns, interval_ns):
+    config = DriverConfig(state_rate=500.0, phase=0.0007)
+    assert config.aligning_interval_ns(next_cycle_ns, tolerance_ns=20_000) == interval_ns
+    assert (next_cycle_ns + interval_ns - 700_000) % 2_000_000 in (0, 10_000)

@@ -193,6 +193,17 @@ class DriverConfig:
         """Driver time of cycle ``i`` (s): ``phase + i / state_rate``."""
         return self.cycle_time_ns(i) / 1e9
 
+    def aligning_interval_ns(self, next_cycle_ns: int, tolerance_ns: int) -> int:
+        """The interval after a cycle due at ``next_cycle_ns`` that puts the one after it on an
+        instant ``phase + i / state_rate``: the period when the cycle is within
+        ``tolerance_ns`` of one, else the period shortened or lengthened by its offset (at most
+        half a period), as a timer that keeps its cycles on a phase adjusts one interval."""
+        period = self.period_ns
+        offset = (next_cycle_ns - self.phase_ns) % period
+        if min(offset, period - offset) <= tolerance_ns:
+            return period
+        return period - offset if 2 * offset <= period else 2 * period - offset
+
 
 @dataclass(frozen=True, eq=False)
 class Reading:

@@ -28,8 +28,8 @@ controllers on ``use_sim_time`` reach their first tick. Each state is published 
 
 The robot's clock, as parameters (what a test in simulated time reproduces of a robot on wall
 time, deterministically): ``phase`` puts the driver's cycles at ``phase + i / state_rate``
-(stamps, physics and, in sim time, ``/clock``; on wall time the timer starts at such an instant
-of the system clock, best effort), offset from the controllers' sample grid ``kT``;
+(stamps, physics and, in sim time, ``/clock``; on wall time the timer's cycles are kept on
+those instants of the system clock, best effort), offset from the controllers' sample grid ``kT``;
 ``command_latency`` (fixed, or drawn per command up to ``command_latency_max`` with ``seed``)
 holds each command back from its arrival until the drive may apply it, from its first cycle
 at or after that (:class:`apc_plant_sim.robot_driver.RobotDriver`). In sim time a command
@@ -84,6 +84,8 @@ DEFAULT_COMMAND_TOPIC = "/effort_controller/commands"
 
 #: sim_time: wall seconds between braked cycles until the first command arrives.
 SIM_RESEND_S = 0.1
+#: Wall time: how far (a fraction of the period) the timer's cycles may drift off ``phase``.
+WALL_PHASE_TOLERANCE = 0.01
 
 _DEFAULTS = DriverConfig()
 #: The arm's start and payload, declared as ``plant_node`` declares them (``payload.at_s`` is
@@ -209,7 +211,7 @@ PARAMS: tuple[Param, ...] = (
         _DEFAULTS.phase,
         "the driver's cycles are at phase + i / state_rate (s, below 1 / state_rate): their "
         "offset from the controllers' sample grid kT (sim_time: stamps and /clock; wall time: "
-        "when the timer starts, best effort)",
+        "the timer's cycles, best effort)",
         0.0,
         1.0,
     ),
@@ -339,12 +341,8 @@ class RobotSimNode(Node):
             tick = guarded(self, self.diagnostics, "sim_wait", self._sim_watch)
             self._timer = self.create_timer(min(self._sim_wait_s, 0.01), tick, clock=self._wall)
         else:
-            # The first cycle at the next instant phase + i / state_rate of the system clock;
-            # the timer then runs at the period from there (the steady clock's periods).
-            now_ns = self.get_clock().now().nanoseconds
-            wait_ns = (config.phase_ns - now_ns) % config.period_ns or config.period_ns
             tick = guarded(self, self.diagnostics, "cycle", self._wall_cycle)
-            self._timer = self.create_timer(wait_ns / wire.NS_PER_S, tick, clock=self._wall)
+            self._timer = self.create_timer(config.period, tick, clock=self._wall)
 
     @property
     def driver_time(self) -> float:
@@ -449,12 +447,33 @@ class RobotSimNode(Node):
             return
         now = self._now()
         if self._start is None:
-            # The first cycle, at the phase's instant: from here the timer runs at the period.
             self._start = now
-            self._timer.timer_period_ns = self.driver.config.period_ns
-            self._timer.reset()
         self._publish(self.driver.measure(now))  # read() -> joint_state_broadcaster
         self._cycle(now)
+        self._keep_phase()
+
+    def _keep_phase(self) -> None:
+        """Keep the timer's cycles on the instants phase + i / state_rate of the system clock.
+
+        The timer runs on the steady clock, its cycles a whole period after the previous one's
+        due time (not after its callback), so one shortened or lengthened interval puts them on
+        the phase: at the first cycles, and again if the clocks drift apart by more than
+        :data:`WALL_PHASE_TOLERANCE` of a period. Best effort: callbacks run late by the
+        executor's latency, and the stamps are the time each one runs.
+        """
+        config = self.driver.config
+        if self._timer.timer_period_ns != config.period_ns:
+            # The adjusted interval is scheduled (at the cycle that just ran): back to the period.
+            self._timer.timer_period_ns = config.period_ns
+            return
+        until_ns = self._timer.time_until_next_call()
+        if until_ns is None:
+            return
+        next_ns = self.get_clock().now().nanoseconds + until_ns
+        tolerance_ns = round(WALL_PHASE_TOLERANCE * config.period_ns)
+        interval_ns = config.aligning_interval_ns(next_ns, tolerance_ns)
+        if interval_ns != config.period_ns:
+            self._timer.timer_period_ns = interval_ns
 
     # -- sim time -------------------------------------------------------------------------------
     def _sim_cycle(self) -> None:
