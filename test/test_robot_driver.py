@@ -257,3 +257,166 @@ def test_cycles_that_got_no_new_command_are_counted_as_held():
     driver.advance(0.004)
     assert driver.counts.held_command_cycles == 2
     assert driver.counts.cycles == 5 and driver.counts.commands == 3
+
+
+# -- the robot's clock: command latency and phase ------------------------------------------------
+
+
+def _first_cycle_applying(engine: RecordingEngine, value: float, cycles: list[float]) -> float:
+    """Driver time of the first cycle whose applied torque has ``value`` on joint_1 (the cycles
+    braked before the first command applied nothing)."""
+    index = next(i for i, (tau, _) in enumerate(engine.applied) if tau[0] == value)
+    return cycles[engine.holds + index]
+
+
+@pytest.mark.parametrize(
+    ("latency", "cycle"),
+    [(0.0, 0), (0.001, 1), (0.02, 2), (0.025, 3), (0.03, 3)],
+)
+def test_fixed_latency_applies_a_command_from_the_first_cycle_at_or_after_it(latency, cycle):
+    """100 Hz driver, a command offered at cycle 0: applicable at 0 + latency, applied from the
+    first cycle at or after (0.02 s lands on cycle 2 exactly, compared to the nanosecond)."""
+    driver, engine = _driver(state_rate=100.0, command_latency=latency)
+    driver.offer([7.0, 0.0, 0.0], 0.0)
+    assert driver.has_command
+    for i in range(6):
+        driver.advance(driver.config.cycle_time(i))
+        # The brakes hold the arm until the command is applicable.
+        assert driver.braked == (i < cycle)
+    assert engine.holds == cycle
+    assert [tau[0] for tau, _ in engine.applied] == [7.0] * (6 - cycle)
+    assert driver.command_time == pytest.approx(latency)
+
+
+def test_latency_keeps_the_arm_on_the_previous_command_until_the_new_one_is_applicable():
+    driver, engine = _driver(state_rate=100.0, command_latency=0.015)
+    driver.offer([1.0, 0.0, 0.0], -0.02)  # applicable at -0.005
+    for i in range(5):
+        t = driver.config.cycle_time(i)
+        if i == 1:
+            driver.offer([2.0, 0.0, 0.0], t)  # applicable at 0.025: cycle 3
+        driver.advance(t)
+    assert [tau[0] for tau, _ in engine.applied] == [1.0, 1.0, 1.0, 2.0, 2.0]
+    # Cycles 1 and 2 re-applied the held command: the new one was on its way.
+    assert driver.counts.held_command_cycles == 3
+
+
+def _random_latency_delays(seed: int) -> list[float]:
+    """Delays (s) from offer to application of 200 commands spaced wider than the latency."""
+    driver, engine = _driver(
+        state_rate=10_000.0,
+        command_latency=0.002,
+        command_latency_max=0.006,
+        latency_seed=seed,
+        effort_limit=(1e6, 1e6, 1e6),
+    )
+    cycles = [driver.config.cycle_time(i) for i in range(200 * 100)]
+    offers = {}
+    for i, t in enumerate(cycles):
+        if i % 100 == 0:  # every 10 ms, a new value
+            offers[float(i // 100 + 1)] = t
+            driver.offer([float(i // 100 + 1), 0.0, 0.0], t)
+        driver.advance(t)
+    return [_first_cycle_applying(engine, v, cycles) - t for v, t in offers.items()]
+
+
+def test_random_latency_stays_within_its_bounds_and_a_seed_reproduces_it():
+    delays = _random_latency_delays(seed=5)
+    # Applied at the first 0.1 ms cycle at or after the drawn latency in [2, 6] ms.
+    assert min(delays) >= 0.002 - 1e-12 and max(delays) < 0.006 + 1e-4
+    # Spread over the interval (uniform draws), not one value.
+    assert min(delays) < 0.0025 and max(delays) > 0.0055
+    assert np.std(delays) == pytest.approx(0.004 / np.sqrt(12), rel=0.2)
+    assert delays == _random_latency_delays(seed=5)
+    assert delays != _random_latency_delays(seed=6)
+
+
+def test_random_latency_keeps_the_commands_order_and_the_newest_applicable_wins():
+    """A command every 1 ms cycle with a latency of 0-10 ms: many are drawn shorter than their
+    predecessor's; none overtakes it, and a cycle applies the newest one that is due."""
+    driver, engine = _driver(
+        state_rate=1000.0,
+        command_latency=0.0,
+        command_latency_max=0.01,
+        latency_seed=2,
+        effort_limit=(1e6, 1e6, 1e6),
+    )
+    for i in range(300):
+        t = driver.config.cycle_time(i)
+        driver.offer([float(i + 1), 0.0, 0.0], t)
+        driver.advance(t)
+    applied = [tau[0] for tau, _ in engine.applied]
+    assert applied == sorted(applied)
+    # Several commands became applicable at the same cycle: only the newest was applied.
+    assert len(set(applied)) < len(applied) - 10 and applied[-1] > 280.0
+
+
+def test_latency_composes_with_command_delay_cycles():
+    """Latency picks the cycle the drive takes a command up; command_delay then delays the torque
+    decided there by whole periods: offered at cycle i, 15 ms at 100 Hz -> cycle i + 2, + 2."""
+    driver, engine = _driver(
+        state_rate=100.0, command_latency=0.015, sensing=ArmEffects(command_delay=2)
+    )
+    for i in range(8):
+        t = driver.config.cycle_time(i)
+        driver.offer([float(i + 1), 0.0, 0.0], t)
+        driver.advance(t)
+    # Braked for cycles 0-1; command 1 applicable at cycle 2, applied over cycle 4.
+    assert engine.holds == 2
+    assert [tau[0] for tau, _ in engine.applied] == [1.0, 1.0, 1.0, 2.0, 3.0, 4.0]
+
+
+def test_the_command_timeout_counts_from_when_a_command_became_applicable():
+    driver, engine = _driver(state_rate=100.0, command_latency=0.05, command_timeout=0.02)
+    driver.offer([3.0, 0.0, 0.0], 0.0)
+    for i in range(9):
+        driver.advance(driver.config.cycle_time(i))
+    # Braked 0-40 ms, the command from 50 ms (age 0-20 ms), zero effort at 80 ms (age 30 ms).
+    assert [tau[0] for tau, _ in engine.applied] == [3.0, 3.0, 3.0, 0.0]
+    assert driver.timed_out and driver.counts.timeouts == 1
+
+
+def test_phase_offsets_the_driver_cycles_and_their_stamps():
+    driver, _ = _driver(state_rate=500.0, phase=0.0007)
+    stamps = []
+    for i in range(5):
+        t = driver.config.cycle_time(i)
+        driver.advance(t)
+        stamps.append(round(driver.measure(t).stamp * 1e9))
+    assert stamps == [700_000 + i * 2_000_000 for i in range(5)]
+    assert [driver.config.cycle_time_ns(i) for i in range(3)] == [700_000, 2_700_000, 4_700_000]
+    assert DriverConfig(state_rate=500.0).cycle_time(3) == 0.006
+
+
+@pytest.mark.parametrize(
+    ("overrides", "param"),
+    [
+        ({"command_latency": -0.001}, "command_latency"),
+        ({"command_latency": float("inf")}, "command_latency"),
+        ({"command_latency": 0.01, "command_latency_max": 0.005}, "command_latency_max"),
+        ({"command_latency_max": float("nan")}, "command_latency_max"),
+        ({"latency_seed": -1}, "latency_seed"),
+        ({"state_rate": 100.0, "phase": 0.01}, "phase"),
+        ({"phase": -1e-4}, "phase"),
+        ({"phase": float("nan")}, "phase"),
+    ],
+)
+def test_bad_latency_or_phase_names_the_parameter(overrides, param):
+    with pytest.raises(DriverError, match=f"^{param}:"):
+        _driver(**overrides)
+
+
+@pytest.mark.parametrize(
+    ("next_cycle_ns", "interval_ns"),
+    [
+        (10_700_000, 2_000_000),  # on the phase (0.7 ms after a multiple of 2 ms)
+        (10_710_000, 2_000_000),  # within the tolerance
+        (11_000_000, 1_700_000),  # 0.3 ms late: the interval after it is shortened
+        (11_700_000, 1_000_000),  # 1 ms late (half a period): shortened
+        (12_500_000, 2_200_000),  # 0.2 ms early: lengthened
+    ],
+)
+def test_aligning_interval_puts_the_cycle_after_the_next_on_the_phase(next_cycle_ns, interval_ns):
+    config = DriverConfig(state_rate=500.0, phase=0.0007)
+    assert config.aligning_interval_ns(next_cycle_ns, tolerance_ns=20_000) == interval_ns
+    assert (next_cycle_ns + interval_ns - 700_000) % 2_000_000 in (0, 10_000)

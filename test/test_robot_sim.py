@@ -217,6 +217,69 @@ def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph,
         assert stamps == [stamps[0] + k * 2_000_000 for k in range(len(stamps))]
 
 
+@pytest.mark.parametrize(
+    ("latency", "phase_ns", "periods"),
+    [("0.0", 0, 1), ("0.025", 4_000_000, 4)],
+    ids=["no latency", "25 ms latency, 4 ms phase"],
+)
+def test_sim_time_command_latency_and_phase(graph, tmp_path, latency, phase_ns, periods):
+    """100 Hz driver in sim time: a step command answering the state at t is applied from the
+    first cycle at or after t + command_latency and reported as the effort of the state one
+    period after that: t + 10 ms without latency, t + 40 ms with 25 ms. Stamps and /clock are
+    on the driver's cycles phase + i * 10 ms."""
+    peer = Peer(graph)
+    with robot_sim(
+        tmp_path,
+        "sim_time:=true",
+        "state_rate:=100.0",
+        "sim_wait_s:=30.0",
+        f"command_latency:={latency}",
+        f"phase:={phase_ns / 1e9}",
+    ) as proc:
+        graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
+        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
+
+        def stamps() -> set[int]:
+            return {wire.stamp_to_ns(m.header.stamp) for _, m in peer.states}
+
+        # Before the first command time moves with the brakes on. Once the driver has taken one
+        # (its /diagnostics say so) it steps only when answered: its newest state is cycle
+        # `cycles`, the one the next command answers.
+        peer.command([0.0, 5.0, 0.0])
+        graph.spin_until(
+            lambda: peer.diagnostics and int(peer.diagnostics[-1].get("commands", 0)) >= 1,
+            10,
+            "the first command taken",
+        )
+        newest = phase_ns + int(peer.diagnostics[-1]["cycles"]) * 10_000_000
+        graph.spin_until(lambda: newest in stamps(), 10, "the driver's newest state")
+
+        def answer(values) -> int:
+            """Answer the state the driver waits on, wait for the next; the answered stamp."""
+            nonlocal newest
+            answered = newest
+            peer.command(values)
+            newest += 10_000_000
+            graph.spin_until(lambda: newest in stamps(), 10, "next state")
+            return answered
+
+        for _ in range(5):
+            answer([0.0, 5.0, 0.0])
+        t_step = answer([0.0, 10.0, 0.0])
+        for _ in range(6):
+            answer([0.0, 10.0, 0.0])
+        effort = {
+            wire.stamp_to_ns(m.header.stamp): peer.by_name(m, "effort")["joint_2"]
+            for _, m in peer.states
+        }
+        first_step = min(stamp for stamp, value in effort.items() if value == 10.0)
+        assert first_step - t_step == periods * 10_000_000
+        # Until then the previous command, not the brakes' zero.
+        assert effort[first_step - 10_000_000] == 5.0
+        assert all(stamp % 10_000_000 == phase_ns for stamp in effort)
+        assert peer.clock and all(c % 10_000_000 == phase_ns for c in peer.clock)
+
+
 def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):
     for params, name in (
         (["engine:=bullet"], "engine"),
@@ -229,6 +292,8 @@ def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):
         (["effects:=puma"], "effects"),
         (["velocity_source:=tacho"], "velocity_source"),
         (["encoder_counts_per_rev:=[0.0, 1.0, 1.0]"], "encoder_counts_per_rev"),
+        (["state_rate:=100.0", "phase:=0.01"], "phase"),
+        (["command_latency:=0.01", "command_latency_max:=0.005"], "command_latency_max"),
     ):
         args = [a for p in params for a in ("-p", p)]
         proc = subprocess.run(

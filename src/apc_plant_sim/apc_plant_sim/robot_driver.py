@@ -9,12 +9,27 @@ the robot's clock, and an effort ``forward_command_controller`` writes the newes
 - :meth:`RobotDriver.measure` is ``read()``: the state at ``now``, in the published joint order
   (any order, with joints apc does not control), velocity and effort optional;
 - :meth:`RobotDriver.offer` is the command subscription: a command with the wrong length or a
-  non-finite value is rejected and counted, never applied; a good one replaces the one held;
+  non-finite value is rejected and counted, never applied; a good one enters the command
+  latency's delay line (below) and replaces the one held once it is applicable;
 - :meth:`RobotDriver.advance` is ``write()`` plus the physics: the held command (or the safe
   torque after ``command_timeout``), clipped to the effort limits, is applied over one driver
   period ``1 / state_rate`` (``command_delay`` periods later, if set) and the engine
   integrates it; then the drives read the arm (quantised positions, the velocity the drive
   reports) for the next ``read()``.
+
+The robot's clock. The driver's cycles are at ``phase + i / state_rate``
+(:meth:`DriverConfig.cycle_time`): ``phase`` offsets them from the controllers' sample grid
+``kT``. A command offered at driver time ``t`` becomes applicable at ``t + latency`` and the
+drive takes it up at its first cycle at or after that (times compared to the nanosecond, a
+stamp's resolution): a delay line in which the newest applicable command wins and commands
+keep their order (one drawn shorter than its predecessor's waits for it, as an in-order
+transport delivers). The latency is ``command_latency`` or, with ``command_latency_max``, drawn
+per command uniformly from ``[command_latency, command_latency_max]`` by a generator seeded with
+``latency_seed`` (runs are reproducible). ``command_latency`` is the phase and transport between
+a controller and the drive's write; the ``command_delay`` of :class:`ArmEffects` comes after it
+and delays the torque the drive decided at a cycle by that many whole periods, so a command
+that becomes applicable at cycle ``c`` is applied over cycle ``c + command_delay``. The command
+timeout counts from when a command became applicable (when the drive received it).
 
 Before the first command the arm stands still on its brakes, like an arm whose brakes release
 when its drives are enabled. After ``command_timeout`` seconds without a command the drive
@@ -37,6 +52,14 @@ from typing import Protocol
 import numpy as np
 
 from apc_plant_sim.effects import ArmEffects, DriveSensing
+
+#: Second entropy word of the latency generator's seed (the sensing noise uses the seed alone).
+_LATENCY_STREAM = 1
+
+
+def _ns(t: float) -> int:
+    """Driver time in ns: commands and cycles are compared at a stamp's resolution."""
+    return round(t * 1e9)
 
 
 class DriverError(ValueError):
@@ -96,6 +119,15 @@ class DriverConfig:
         white noise of ``velocity_noise_rad_s``, or the backward difference of the quantised
         positions over one driver period) and a ``command_delay`` of whole driver periods.
         Its friction and armature fields belong to the engine and are not read here.
+    command_latency : float
+        Seconds (driver clock) from a command's arrival until the drive may apply it.
+    command_latency_max : float or None
+        None: every command waits ``command_latency``; else each waits a latency drawn
+        uniformly from ``[command_latency, command_latency_max]``.
+    latency_seed : int
+        Seed of the latency draws.
+    phase : float
+        The driver's cycles are at ``phase + i / state_rate`` (s, in ``[0, 1 / state_rate)``).
     """
 
     state_rate: float = 500.0
@@ -108,6 +140,10 @@ class DriverConfig:
     publish_effort: bool = True
     effort_limit: tuple[float, ...] = ()
     sensing: ArmEffects = field(default_factory=ArmEffects)
+    command_latency: float = 0.0
+    command_latency_max: float | None = None
+    latency_seed: int = 0
+    phase: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("state_rate", "command_timeout"):
@@ -120,10 +156,53 @@ class DriverConfig:
             raise DriverError(f"extra_position: must be finite, got {self.extra_position}")
         if not all(math.isfinite(v) and v > 0.0 for v in self.effort_limit):
             raise DriverError(f"effort_limit: every value must be > 0, got {self.effort_limit}")
+        if not (math.isfinite(self.command_latency) and self.command_latency >= 0.0):
+            raise DriverError(f"command_latency: must be >= 0, got {self.command_latency}")
+        high = self.command_latency_max
+        if high is not None and not (math.isfinite(high) and high >= self.command_latency):
+            raise DriverError(
+                f"command_latency_max: must be >= command_latency ({self.command_latency}), "
+                f"got {high}"
+            )
+        if isinstance(self.latency_seed, bool) or not isinstance(self.latency_seed, int):
+            raise DriverError(f"latency_seed: must be an integer, got {self.latency_seed!r}")
+        if self.latency_seed < 0:
+            raise DriverError(f"latency_seed: must be >= 0, got {self.latency_seed}")
+        if not (math.isfinite(self.phase) and 0 <= self.phase_ns < self.period_ns):
+            raise DriverError(
+                f"phase: must be in [0, {self.period}) (one driver period), got {self.phase}"
+            )
 
     @property
     def period(self) -> float:
         return 1.0 / self.state_rate
+
+    @property
+    def period_ns(self) -> int:
+        return round(1e9 / self.state_rate)
+
+    @property
+    def phase_ns(self) -> int:
+        return round(self.phase * 1e9)
+
+    def cycle_time_ns(self, i: int) -> int:
+        """Driver time of cycle ``i`` (ns): ``phase + i / state_rate``."""
+        return self.phase_ns + i * self.period_ns
+
+    def cycle_time(self, i: int) -> float:
+        """Driver time of cycle ``i`` (s): ``phase + i / state_rate``."""
+        return self.cycle_time_ns(i) / 1e9
+
+    def aligning_interval_ns(self, next_cycle_ns: int, tolerance_ns: int) -> int:
+        """The interval after a cycle due at ``next_cycle_ns`` that puts the one after it on an
+        instant ``phase + i / state_rate``: the period when the cycle is within
+        ``tolerance_ns`` of one, else the period shortened or lengthened by its offset (at most
+        half a period), as a timer that keeps its cycles on a phase adjusts one interval."""
+        period = self.period_ns
+        offset = (next_cycle_ns - self.phase_ns) % period
+        if min(offset, period - offset) <= tolerance_ns:
+            return period
+        return period - offset if 2 * offset <= period else 2 * period - offset
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,6 +278,12 @@ class RobotDriver:
         self.counts = DriverCounts()
         self._command: np.ndarray | None = None  # engine order
         self._command_time = -math.inf
+        self._received = False  # a command was accepted (it may still be in the delay line)
+        # Accepted commands not yet applicable: (driver time it becomes applicable in ns,
+        # command), in arrival order with nondecreasing times.
+        self._pending: deque[tuple[int, np.ndarray]] = deque()
+        # Its own stream, apart from the velocity noise's generator of the sensing seed.
+        self._latency_rng = np.random.default_rng([config.latency_seed, _LATENCY_STREAM])
         self._fresh_command = False  # a command arrived since the last advance
         self._timed_out = False
         self._applied = np.zeros(n)  # torque over the period that ended at the last advance
@@ -230,22 +315,44 @@ class RobotDriver:
         else:
             command = np.empty(n)
             command[self._command_index] = values
-            self._command = command
-            self._command_time = now
-            self._fresh_command = True
+            due_ns = _ns(now + self._next_latency())
+            if self._pending:  # order kept: never before the command offered before it
+                due_ns = max(due_ns, self._pending[-1][0])
+            self._pending.append((due_ns, command))
+            self._received = True
             self.counts.commands += 1
             return None
         self.counts.rejected += 1
         return reason
 
+    def _next_latency(self) -> float:
+        config = self.config
+        if config.command_latency_max is None:
+            return config.command_latency
+        return float(self._latency_rng.uniform(config.command_latency, config.command_latency_max))
+
     @property
     def has_command(self) -> bool:
-        return self._command is not None
+        """A command was accepted (the drive may not have applied it yet: see the latency)."""
+        return self._received
+
+    @property
+    def pending_commands(self) -> int:
+        """Accepted commands still waiting for their latency to pass."""
+        return len(self._pending)
 
     @property
     def command_time(self) -> float:
-        """Driver time the held command arrived (``-inf`` before the first)."""
+        """Driver time the held command became applicable (``-inf`` before the first)."""
         return self._command_time
+
+    def _take_applicable(self, now: float) -> None:
+        """Hold the newest command applicable at ``now``; drop the older ones it supersedes."""
+        now_ns = _ns(now)
+        while self._pending and self._pending[0][0] <= now_ns:
+            due_ns, self._command = self._pending.popleft()
+            self._command_time = due_ns / 1e9
+            self._fresh_command = True
 
     @property
     def timed_out(self) -> bool:
@@ -273,16 +380,17 @@ class RobotDriver:
     def torque(self, now: float) -> tuple[np.ndarray, bool]:
         """The torque the drive applies from ``now``: (torque, timed_out), before clipping."""
         assert self._command is not None
-        if now - self._command_time > self.config.command_timeout:
+        if _ns(now) - _ns(self._command_time) > _ns(self.config.command_timeout):
             return -self.config.timeout_damping * self.engine.qd, True
         return self._command, False
 
     def advance(self, now: float) -> np.ndarray:
         """Apply the drive's torque from ``now`` for one period and integrate; return it.
 
-        Before the first command the brakes hold the arm (nothing is integrated).
+        Before the first command is applicable the brakes hold the arm (nothing is integrated).
         """
         self.counts.cycles += 1
+        self._take_applicable(now)
         if self._command is None:
             self.engine.hold()
             self._applied = np.zeros(len(self.joint_names))

@@ -25,6 +25,16 @@ command the arm stands on its brakes and time moves one cycle every :data:`SIM_R
 ``sim_wait_s`` if shorter) of wall time: controllers that start later find a state, and
 controllers on ``use_sim_time`` reach their first tick. Each state is published before the
 ``/clock`` that reaches its time, so a controller ticking then has it in hand.
+
+The robot's clock, as parameters (what a test in simulated time reproduces of a robot on wall
+time, deterministically): ``phase`` puts the driver's cycles at ``phase + i / state_rate``
+(stamps, physics and, in sim time, ``/clock``; on wall time the timer's cycles are kept on
+those instants of the system clock, best effort), offset from the controllers' sample grid ``kT``;
+``command_latency`` (fixed, or drawn per command up to ``command_latency_max`` with ``seed``)
+holds each command back from its arrival until the drive may apply it, from its first cycle
+at or after that (:class:`apc_plant_sim.robot_driver.RobotDriver`). In sim time a command
+arrives at the time of the state it answers (the controllers compute in no simulated time):
+the driver still waits for it, then steps on and applies it once its latency has passed.
 """
 
 from __future__ import annotations
@@ -74,6 +84,8 @@ DEFAULT_COMMAND_TOPIC = "/effort_controller/commands"
 
 #: sim_time: wall seconds between braked cycles until the first command arrives.
 SIM_RESEND_S = 0.1
+#: Wall time: how far (a fraction of the period) the timer's cycles may drift off ``phase``.
+WALL_PHASE_TOLERANCE = 0.01
 
 _DEFAULTS = DriverConfig()
 #: The arm's start and payload, declared as ``plant_node`` declares them (``payload.at_s`` is
@@ -177,7 +189,33 @@ PARAMS: tuple[Param, ...] = (
         -1,
         1000,
     ),
-    Param("seed", 0, "seed of the velocity noise", 0, 2**31 - 1),
+    Param(
+        "command_latency",
+        _DEFAULTS.command_latency,
+        "seconds (driver clock) from a command's arrival (sim_time: the time of the state it "
+        "answers) until the drive may apply it, from its first cycle at or after that; 0 = the "
+        "next cycle (sim_time: the same cycle)",
+        0.0,
+        10.0,
+    ),
+    Param(
+        "command_latency_max",
+        -1.0,
+        ">= command_latency: each command's latency is drawn uniformly from [command_latency, "
+        "command_latency_max] (seed; commands keep their order); < 0 = command_latency for all",
+        -1.0,
+        10.0,
+    ),
+    Param(
+        "phase",
+        _DEFAULTS.phase,
+        "the driver's cycles are at phase + i / state_rate (s, below 1 / state_rate): their "
+        "offset from the controllers' sample grid kT (sim_time: stamps and /clock; wall time: "
+        "the timer's cycles, best effort)",
+        0.0,
+        1.0,
+    ),
+    Param("seed", 0, "seed of the velocity noise and of the random command latency", 0, 2**31 - 1),
     Param("sim_time", False, "own the clock: publish /clock and step as the controllers answer"),
     Param(
         "sim_wait_s",
@@ -210,6 +248,12 @@ def _driver_config(values: dict[str, Any], effects: ArmEffects) -> DriverConfig:
             publish_effort=values["publish_effort"],
             effort_limit=tuple(values["effort_limit"]),
             sensing=effects,
+            command_latency=values["command_latency"],
+            command_latency_max=(
+                values["command_latency_max"] if values["command_latency_max"] >= 0.0 else None
+            ),
+            latency_seed=values["seed"],
+            phase=values["phase"],
         )
     except DriverError as exc:
         raise ConfigError(f"parameter '{str(exc).split(':')[0]}': {exc}") from None
@@ -264,6 +308,10 @@ class RobotSimNode(Node):
         self.diagnostics = Diagnostics(self.get_fully_qualified_name(), hardware_id="robot_sim")
         self.diagnostics.set("engine", engine_name)
         self.diagnostics.set("state_rate_hz", config.state_rate)
+        self.diagnostics.set("phase_s", config.phase)
+        self.diagnostics.set("command_latency_s", config.command_latency)
+        if config.command_latency_max is not None:
+            self.diagnostics.set("command_latency_max_s", config.command_latency_max)
         self._msg = JointState()
         self._clock_msg = ClockMsg()
         # joint_state_broadcaster and forward_command_controller both use SystemDefaultsQoS.
@@ -281,15 +329,15 @@ class RobotSimNode(Node):
         )
         self._diagnostics_pub = DiagnosticsPublisher(self, self.diagnostics)
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
-        # Driver time: sim time from 0, or the node's clock (system time) at the first cycle.
-        self._start: float | None = 0.0 if self.sim_time else None
-        self._period_ns = round(wire.NS_PER_S / config.state_rate)
-        self._k = 0  # sim time of the state last published: k periods
-        self._t = 0.0
+        # Driver time: the first cycle's sim time (phase), or the node's clock (system time) at
+        # the first cycle.
+        self._start: float | None = config.phase if self.sim_time else None
+        self._k = 0  # sim time of the state last published: cycle k, config.cycle_time(k)
+        self._t = config.phase
         self._cycles_per_command = int(values["sim_cycles_per_command"])
         self._published_wall = 0.0
         if self.sim_time:
-            self._publish(self.driver.measure(0.0))
+            self._publish(self.driver.measure(self._t))
             tick = guarded(self, self.diagnostics, "sim_wait", self._sim_watch)
             self._timer = self.create_timer(min(self._sim_wait_s, 0.01), tick, clock=self._wall)
         else:
@@ -300,7 +348,7 @@ class RobotSimNode(Node):
     def driver_time(self) -> float:
         """Driver time since the first cycle (s): sim time, or wall time since it started."""
         if self.sim_time:
-            return self._t
+            return self._t - self.driver.config.phase
         return 0.0 if self._start is None else self._now() - self._start
 
     # -- wire -----------------------------------------------------------------------------------
@@ -402,6 +450,30 @@ class RobotSimNode(Node):
             self._start = now
         self._publish(self.driver.measure(now))  # read() -> joint_state_broadcaster
         self._cycle(now)
+        self._keep_phase()
+
+    def _keep_phase(self) -> None:
+        """Keep the timer's cycles on the instants phase + i / state_rate of the system clock.
+
+        The timer runs on the steady clock, its cycles a whole period after the previous one's
+        due time (not after its callback), so one shortened or lengthened interval puts them on
+        the phase: at the first cycles, and again if the clocks drift apart by more than
+        :data:`WALL_PHASE_TOLERANCE` of a period. Best effort: callbacks run late by the
+        executor's latency, and the stamps are the time each one runs.
+        """
+        config = self.driver.config
+        if self._timer.timer_period_ns != config.period_ns:
+            # The adjusted interval is scheduled (at the cycle that just ran): back to the period.
+            self._timer.timer_period_ns = config.period_ns
+            return
+        until_ns = self._timer.time_until_next_call()
+        if until_ns is None:
+            return
+        next_ns = self.get_clock().now().nanoseconds + until_ns
+        tolerance_ns = round(WALL_PHASE_TOLERANCE * config.period_ns)
+        interval_ns = config.aligning_interval_ns(next_ns, tolerance_ns)
+        if interval_ns != config.period_ns:
+            self._timer.timer_period_ns = interval_ns
 
     # -- sim time -------------------------------------------------------------------------------
     def _sim_cycle(self) -> None:
@@ -413,7 +485,7 @@ class RobotSimNode(Node):
         """
         self._cycle(self._t)
         self._k += 1
-        self._t = self._k * self._period_ns / wire.NS_PER_S
+        self._t = self.driver.config.cycle_time(self._k)
         self._publish(self.driver.measure(self._t))
 
     def _sim_step(self) -> None:
