@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from apc_core.params import ConfigError, Param
+from apc_core.robot import PAPER_PERIOD_S
 from apc_feedback.laws import LAW_PARAMS, LAWS
 
 
@@ -66,22 +67,13 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
 
 
 def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
-    """The recommended preset for an arm behind a drive: a command applied one period late and
-    the velocity differenced from encoder positions (``bench/effects_sweep.py``).
-
-    The identified model carries the delay (``command_delay``) and the two-period input of a
-    differenced velocity (``input_periods``). Measured on the 3-joint PUMA 560 with all of
+    """The recommended preset told that the drive applies every command one period late: the
+    offline stand-in for what robot mode measures (it splits ``Ĝ(0)`` by the driver period it
+    sees). Measured on the 3-joint PUMA 560 with all of
     ``apc_plant_sim.effects.puma560_effects`` on (friction, armature, quantisation, the
-    differenced velocity, the delay), it beats computed torque and PID on every joint of cases
-    (a)-(c) and the pickup; friction needs no option of its own once the model has its prior
-    (``alpha_model``), and skipping identification while a joint sticks
-    (``identify_min_speed``) only makes it worse there.
+    differenced velocity, the delay) in ``bench/effects_sweep.py``.
     """
-    return {
-        **recommended_settings(alpha),
-        "input_lags": 2,
-        "input_delay": 0.01,
-    }
+    return {**recommended_settings(alpha), "input_delay": PAPER_PERIOD_S}
 
 
 #: Each preset by name: ``preset(alpha)`` gives the adaptive settings it changes.
