@@ -439,6 +439,10 @@ class AdaptiveFeedback(FeedbackLaw):
             )
             self.rls.reset(F0, G0)
             self._prior_input_gain = _summed_inputs(G0, self.n_joints)
+            # Before the first sample the arm is taken to hold its nominal torque (δu = 0), as
+            # Eq. 16's first step takes it: identification starts at sample 1 with or without lags.
+            self._inputs.fill(0.0)
+            self._inputs_known = lags
             self._started = True
         elif k != self._k_prev + 1:
             skipped = True

@@ -123,7 +123,7 @@ def run_closed_loop(
     rejected = np.zeros(rows, dtype=bool)
     rls = getattr(feedback, "rls", None) if record_parameters else None
     F = np.zeros((rows, 2 * n, 2 * n)) if rls is not None else None
-    G = np.zeros((rows, 2 * n, n)) if rls is not None else None
+    G = np.zeros((rows, 2 * n, rls.m - 2 * n - 1)) if rls is not None else None
     w = np.zeros((rows, 2 * n)) if rls is not None else None
 
     applied_prev: np.ndarray | None = None
@@ -142,7 +142,7 @@ def run_closed_loop(
         if fb.residual is not None:
             residual_norm[i] = float(np.linalg.norm(fb.residual))
         if rls is not None:
-            F[i], G[i], w[i] = rls.F, feedback.identified_input_gain, rls.w
+            F[i], G[i], w[i] = rls.F, rls.G, rls.w
         if plant_changes and k in plant_changes:
             plant.set_robot(plant_changes[k])
         if i < n_samples:

@@ -496,17 +496,22 @@ def _figure_identified_parameters(run: RecordedRun, title: str | None = None) ->
         )
     theta_t = np.asarray(run.theta_t, dtype=float)
     n = run.q.shape[1]
-    if theta_t.shape[1:] != (2 * n, 3 * n + 1):
-        raise ValueError(f"theta_t has shape {theta_t.shape}, expected (N, {2 * n}, {3 * n + 1})")
+    columns = theta_t.shape[2] if theta_t.ndim == 3 else 0
+    if theta_t.shape[1:2] != (2 * n,) or columns < 3 * n + 1 or (columns - 1) % n:
+        raise ValueError(
+            f"theta_t has shape {theta_t.shape}, expected (N, {2 * n}, {2 * n} + (L+1) {n} + 1)"
+        )
+    # Ĝ of a model with input lags is [Ĝ₀ … Ĝ_L]: their sum is the effect of a held input.
+    g_sum = theta_t[:, :, 2 * n : columns - 1].reshape(len(theta_t), 2 * n, -1, n).sum(axis=2)
     fig, axes = _new_figure((12.0, 8.0), 2, 2, sharex=True)
     ax_g, ax_f, ax_w, ax_p = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
     t = run.t
     for i in range(n):
         style = {"color": f"C{i}", "linewidth": 1.3, "label": f"joint {i + 1}"}
-        ax_g.plot(t, theta_t[:, n + i, 2 * n + i], **style)
+        ax_g.plot(t, g_sum[:, n + i, i], **style)
         ax_f.plot(t, theta_t[:, n + i, i], **style)
-        ax_w.plot(t, theta_t[:, n + i, 3 * n], **style)
-    ax_g.set_title("(a) Ĝ velocity block, diagonal (≈ T D⁻¹)", fontsize=10)
+        ax_w.plot(t, theta_t[:, n + i, columns - 1], **style)
+    ax_g.set_title("(a) Ĝ velocity block, diagonal (≈ T D⁻¹; with lags Σ Ĝ_j)", fontsize=10)
     ax_g.set_ylabel("Ĝ[n+i, i] (rad/s per N m)")
     ax_f.set_title("(b) F̂ gravity stiffness (velocity row i, position column i)", fontsize=10)
     ax_f.set_ylabel("F̂[n+i, i] (1/s)")
@@ -548,7 +553,8 @@ def _figure_identified_parameters(run: RecordedRun, title: str | None = None) ->
 def identified_parameters(run: RecordedRun, out: str | Path, title: str | None = None) -> Path:
     """Identified parameters of an adaptive run over time, in four panels.
 
-    (a) the diagonal of Ĝ's velocity block, ``Ĝ[n+i, i]`` (≈ T D⁻¹, rad/s per N m);
+    (a) the diagonal of Ĝ's velocity block, ``Ĝ[n+i, i]`` (≈ T D⁻¹, rad/s per N m; with input
+        lags, of their sum);
     (b) the gravity stiffness ``F̂[n+i, i]`` (velocity row, position column, 1/s);
     (c) the velocity rows of ``ŵ`` (rad/s, apc's sign convention);
     (d) trace(P) (log scale, left axis) and the residual norm (log scale, right axis).
@@ -556,7 +562,8 @@ def identified_parameters(run: RecordedRun, out: str | Path, title: str | None =
     Parameters
     ----------
     run : RecordedRun
-        A run of the adaptive law (``theta_t`` of shape (N, 2n, 3n+1)).
+        A run of the adaptive law (``theta_t`` of shape (N, 2n, 3n+1), or with ``L`` input
+        lags (N, 2n, 2n + (L+1) n + 1)).
     out : path
         PNG file to write.
     title : str, optional

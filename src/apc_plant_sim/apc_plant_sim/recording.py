@@ -36,7 +36,7 @@ class RecordedRun:
         Feedback torque.
     trace_p, residual_norm : (N,)
         Identification telemetry (NaN without an adaptive law).
-    theta_t : (N, 2n, 3n+1) or None
+    theta_t : (N, 2n, 3n+1) or None (with L input lags (N, 2n, 2n + (L+1) n + 1))
         Θᵀ = ``[F̂ Ĝ ŵ]`` per sample.
     run : dict
         The experiment description stored in the file (``custom_data['apc.run']``), if any.

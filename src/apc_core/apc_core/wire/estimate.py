@@ -17,7 +17,8 @@ from apc_core.wire.fields import WireError, check_finite, to_double_array
 # the recorded message format and keep their spelling.
 #: ``layout.dim[0].label`` of an estimate: the rows of Θᵀ = [F G w] (p = 2n).
 ESTIMATE_ROWS_LABEL = "theta_rows"
-#: ``layout.dim[1].label`` of an estimate: the columns of Θᵀ (p + n + 1 = 3n + 1).
+#: ``layout.dim[1].label`` of an estimate: the columns of Θᵀ (p + n + 1 = 3n + 1; with L input
+#: lags p + (L+1) n + 1).
 ESTIMATE_COLS_LABEL = "theta_cols"
 #: The scalars after Θᵀ in ``data``, in order.
 ESTIMATE_TRAILER = ("trace_p", "residual_norm", "stamp_ns")
@@ -34,7 +35,7 @@ class Estimate:
     F : (p, p) ndarray
         State matrix estimate F̂ of ``δx(k+1) = F δx(k) + G δu(k) + w``.
     G : (p, n) ndarray
-        Input matrix estimate Ĝ.
+        Input matrix estimate Ĝ; with ``L`` input lags ``[Ĝ₀ Ĝ₁ … Ĝ_L]``, (p, (L+1) n).
     w : (p,) ndarray
         Offset estimate ŵ.
     trace_p : float
