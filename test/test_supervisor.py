@@ -226,3 +226,37 @@ def test_a_move_on_a_slow_driver_is_held_by_the_fallback_with_the_pid_too():
         run = run_robot_loop(3.0, supervisor=SupervisorConfig(fallback=fallback), **slow)
         assert run.counts["supervisor.handovers"] >= 1
         assert run.max_tracking_error_deg() < bound
+
+
+# -- robot_node's parameters -------------------------------------------------------------------
+@pytest.mark.ros
+def test_robot_node_builds_the_supervisor_from_its_parameters_and_names_a_bad_one():
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from apc_feedback.robot_node import RobotNode
+
+    def configured(**values):
+        overrides = [Parameter("robot_description_path", value="puma560_3dof.urdf")]
+        overrides += [Parameter(name, value=value) for name, value in values.items()]
+        node = RobotNode(context=context, parameter_overrides=overrides)
+        node.trigger_configure()
+        return node
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes = []
+    try:
+        nodes.append(configured(**{"supervisor.fallback": "pid"}))
+        loop = nodes[-1].loop
+        assert loop.supervisor is not None and loop.fallback.kind == "pid"
+        nodes.append(configured(**{"supervisor.enable": False}))
+        assert nodes[-1].loop.supervisor is None
+        nodes.append(configured(**{"supervisor.fallback": "pd"}))
+        assert nodes[-1].configure_error.startswith("parameter 'supervisor.fallback'")
+        nodes.append(configured(**{"supervisor.gain_low": 1.0, "supervisor.gain_high": 1.0}))
+        assert nodes[-1].configure_error.startswith("parameter 'supervisor.gain_low'")
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.shutdown(context=context)
