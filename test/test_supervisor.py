@@ -42,12 +42,11 @@ QUIET = dict(law=NO_GAIN, residual=None, clipped=False)
 
 # -- the triggers, one at a time ----------------------------------------------------------------
 def test_tracking_error_fires_on_a_growing_error_beyond_the_bound_not_on_an_offset():
-    sup = Supervisor(SupervisorConfig(), 2, T, np.array([0.0, 0.04]))
-    assert sup.bound.tolist() == [0.02, 0.01]  # a quarter of joint 2's tolerance
+    sup = Supervisor(SupervisorConfig(error_bound=0.01), 2, T)
     # a constant offset beyond the bound is no trigger
     for k in range(10):
         assert sup.update(k, np.array([0.03, 0.0]), **QUIET) is None
-    # joint 2: beyond its bound and growing
+    # joint 2: beyond the bound and growing
     events = [sup.update(k, np.array([0.0, 0.005 * (k - 9)]), **QUIET) for k in range(10, 14)]
     # 0.015 rad: beyond 0.01 and above its 0 three samples before; then the fallback commands
     assert events == [None, None, "tracking_error", None]
@@ -130,7 +129,7 @@ def test_a_path_tolerance_abort_hands_the_hold_to_the_fallback():
         gravity=lambda q: np.zeros(2),
         path_tolerance=np.full(2, 0.1),
         count=lambda name: counts.update((name,)),
-        supervisor=Supervisor(SupervisorConfig(), 2, T, np.full(2, 0.1)),
+        supervisor=Supervisor(SupervisorConfig(), 2, T),
         fallback=fallback,
     )
     ms, tick = 1_000_000, 10_000_000

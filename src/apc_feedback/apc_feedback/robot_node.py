@@ -168,7 +168,7 @@ class RobotNode(LifecycleNode):
         data = model.createData()
         self.joint_names = robot.joint_names
         path_tolerance = _per_joint("path_tolerance", values["path_tolerance"], n)
-        supervision = self._supervision(values, robot, path_tolerance)
+        supervision = self._supervision(values, robot)
         self.loop = RobotLoop(
             law=law,
             sampling=sampling,
@@ -207,7 +207,7 @@ class RobotNode(LifecycleNode):
         )
 
     @staticmethod
-    def _supervision(values: dict[str, Any], robot: Any, path_tolerance: np.ndarray) -> dict:
+    def _supervision(values: dict[str, Any], robot: Any) -> dict:
         """The supervisor and its fallback law for the adaptive law (none for another law, or
         with ``supervisor.enable`` false)."""
         try:
@@ -222,7 +222,7 @@ class RobotNode(LifecycleNode):
         except FeedbackError as exc:
             raise ConfigError(f"parameter 'pid.{exc.field}': {exc}") from None
         return {
-            "supervisor": Supervisor(config, robot.n_joints, period, path_tolerance),
+            "supervisor": Supervisor(config, robot.n_joints, period),
             "fallback": fallback,
         }
 

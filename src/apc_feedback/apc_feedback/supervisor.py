@@ -6,9 +6,11 @@ can go wrong and Eq. 35 then drives the arm to its limits. :class:`Supervisor` w
 adaptive law's samples and trips, handing the joints to a fallback law (computed torque:
 bounded on every arm measured), on the first of these triggers, each named:
 
-- ``tracking_error``: ``|q - q_d|`` on a joint beyond its bound (:meth:`SupervisorConfig.bound`)
-  *and* larger than it was ``error_growth_samples`` samples before: a growing error, not a
-  constant offset;
+- ``tracking_error``: ``|q - q_d|`` on a joint beyond ``error_bound`` *and* larger than it
+  was ``error_growth_samples`` samples before: a growing error, not a constant offset. One
+  bound for holds and moves, not a fraction of the path tolerance: a tolerance set tight on
+  purpose (to abort a goal the arm cannot follow) would make it fire on a law that is fine;
+  a joint beyond its path tolerance while moving hands over anyway (the loop's abort);
 - ``input_gain``: the identified input gain's velocity block ``Ĝ_v`` (rows n..2n of
   ``law.identified_input_gain``, ≈ ``T D⁻¹``) leaving a region around the model's ``Ĝ_v(0)``
   (``law.prior_input_gain``, Eq. 33): a diagonal entry at or below ``gain_low`` times its prior
@@ -31,8 +33,7 @@ Clean: the paper's move on 1, 2 and 3 ms drivers, ticks at two phases, commands 
 1 kHz, holds with the first command 4 ms late or a fifth of them 6 ms late. Lost: 4, 5 and
 10 ms drivers, commands 6 ms late at 1 kHz, a 10 ms driver with 30 % of commands 6 ms late.
 
-- tracking error: clean runs reach 0.34 deg (0.006 rad); bound 0.02 rad (1.15 deg), or a
-  quarter of a path tolerance below 0.08 rad;
+- tracking error: clean runs reach 0.34 deg (0.006 rad); bound 0.02 rad (1.15 deg);
 - input gain: clean runs keep each diagonal ratio within 0.24-1.005 and the smallest
   eigenvalue of the relative symmetric part at 0.15 or more; lost runs make it negative
   within a sample of the first degree of error (10 ms driver: the 7th sample, 0.43 deg off),
@@ -95,17 +96,9 @@ class SupervisorConfig:
     kv: float = setting(60.0, "computed-torque fallback's Kv (1/s)", 0.0, 1e9)
     error_bound: float = setting(
         0.02,
-        "tracking_error trigger: |q - q_d| bound (rad), growing; the bound of a joint without "
-        "a path tolerance",
+        "tracking_error trigger: |q - q_d| bound (rad) on every joint, with the error growing",
         1e-6,
         10.0,
-    )
-    error_fraction: float = setting(
-        0.25,
-        "tracking_error trigger: bound as a fraction of a joint's path_tolerance, where smaller "
-        "than error_bound",
-        1e-3,
-        1.0,
     )
     error_growth_samples: int = setting(
         3,
@@ -170,13 +163,6 @@ class SupervisorConfig:
                 field="gain_low",
             )
 
-    def bound(self, path_tolerance: np.ndarray) -> np.ndarray:
-        """Per joint ``tracking_error`` bound (rad): ``error_fraction`` of the path tolerance
-        where that is smaller than ``error_bound``, else ``error_bound``."""
-        tolerance = np.asarray(path_tolerance, dtype=float)
-        scaled = self.error_fraction * tolerance
-        return np.where((tolerance > 0.0) & (scaled < self.error_bound), scaled, self.error_bound)
-
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> SupervisorConfig:
         return settings_from(SupervisorConfig, values, SupervisorError, "supervisor parameter")
@@ -193,21 +179,12 @@ class Supervisor:
     n_joints : int
     period : float
         Sample period T (s).
-    path_tolerance : (n,) array
-        The loop's path tolerance per joint (rad, 0 = none): scales the error bound.
     """
 
-    def __init__(
-        self,
-        config: SupervisorConfig,
-        n_joints: int,
-        period: float,
-        path_tolerance: np.ndarray | None = None,
-    ) -> None:
+    def __init__(self, config: SupervisorConfig, n_joints: int, period: float) -> None:
         self.config = config
         self.n_joints = n_joints
-        tolerance = np.zeros(n_joints) if path_tolerance is None else path_tolerance
-        self.bound = config.bound(np.broadcast_to(tolerance, (n_joints,)))
+        self.bound = np.full(n_joints, config.error_bound)
         self._settle_samples = round(config.settle_time / period)
         self._streak = 0  # hand-overs, each within 20 settle times of the hand-back before
         self._handback_k: int | None = None

@@ -139,7 +139,7 @@ def run_robot_loop(
     supervision = {}
     if supervisor is not None and supervisor.enable:
         supervision = {
-            "supervisor": Supervisor(supervisor, 3, 0.01, tolerance),
+            "supervisor": Supervisor(supervisor, 3, 0.01),
             "fallback": fallback_law(supervisor, controller, 0.01),
         }
     loop = RobotLoop(
