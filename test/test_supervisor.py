@@ -45,9 +45,20 @@ def test_tracking_error_fires_on_a_growing_error_beyond_the_bound_not_on_an_offs
     sup = Supervisor(SupervisorConfig(error_bound=0.01), 2, T)
     # a constant offset beyond the bound is no trigger
     for k in range(10):
-        assert sup.update(k, np.array([0.03, 0.0]), **QUIET) is None
+        assert sup.update(k, np.array([0.03, 0.0]), np.zeros(2), **QUIET) is None
+    # joint 2: beyond the bound and growing, but more slowly each sample (an arm being stopped)
+    sup = Supervisor(SupervisorConfig(error_bound=0.01), 2, T)
+    for k in range(10):
+        slowing = np.array([0.0, 0.5 / (k + 1)])
+        assert sup.update(k, np.array([0.0, 0.02 + 0.001 * k]), slowing, **QUIET) is None
+    sup = Supervisor(SupervisorConfig(error_bound=0.01), 2, T)
+    for k in range(10):
+        assert sup.update(k, np.zeros(2), np.zeros(2), **QUIET) is None
     # joint 2: beyond the bound and growing
-    events = [sup.update(k, np.array([0.0, 0.005 * (k - 9)]), **QUIET) for k in range(10, 14)]
+    events = [
+        sup.update(k, np.array([0.0, 0.005 * (k - 9)]), np.array([0.0, 0.5]), **QUIET)
+        for k in range(10, 14)
+    ]
     # 0.015 rad: beyond 0.01 and above its 0 three samples before; then the fallback commands
     assert events == [None, None, "tracking_error", None]
     assert sup.in_charge == FALLBACK and sup.reason == "tracking_error"
@@ -66,27 +77,31 @@ def test_input_gain_fires_outside_the_region_around_eq_33s_gain():
     }
     for name, (g, expected) in cases.items():
         sup = Supervisor(SupervisorConfig(), 2, T)
-        assert sup.update(0, np.zeros(2), _gains(g0, g), None, False) == expected, name
+        assert sup.update(0, np.zeros(2), np.zeros(2), _gains(g0, g), None, False) == expected, name
 
 
 def test_residual_fires_when_it_explodes_against_its_running_mean():
     sup = Supervisor(SupervisorConfig(), 3, T)
     for k in range(100):
-        assert sup.update(k, np.zeros(3), NO_GAIN, np.full(6, 0.05), False) is None
-    assert sup.update(100, np.zeros(3), NO_GAIN, np.full(6, 0.7), False) is None  # below floor
-    assert sup.update(101, np.zeros(3), NO_GAIN, np.full(6, 3.0), False) == "residual"
+        assert sup.update(k, np.zeros(3), np.zeros(3), NO_GAIN, np.full(6, 0.05), False) is None
+    assert (
+        sup.update(100, np.zeros(3), np.zeros(3), NO_GAIN, np.full(6, 0.7), False) is None
+    )  # below floor
+    assert sup.update(101, np.zeros(3), np.zeros(3), NO_GAIN, np.full(6, 3.0), False) == "residual"
     # a residual that is large against a running mean already large is not an explosion
     sup = Supervisor(SupervisorConfig(), 3, T)
     for k in range(100):
-        assert sup.update(k, np.zeros(3), NO_GAIN, np.full(6, 0.3), False) is None
+        assert sup.update(k, np.zeros(3), np.zeros(3), NO_GAIN, np.full(6, 0.3), False) is None
     for k in range(100, 200):
-        assert sup.update(k, np.zeros(3), NO_GAIN, np.full(6, 2.0), False) is None
+        assert sup.update(k, np.zeros(3), np.zeros(3), NO_GAIN, np.full(6, 2.0), False) is None
 
 
 def test_saturation_fires_after_samples_in_a_row_clipped():
     sup = Supervisor(SupervisorConfig(saturation_samples=5), 2, T)
     pattern = [True] * 4 + [False] + [True] * 5
-    events = [sup.update(k, np.zeros(2), NO_GAIN, None, c) for k, c in enumerate(pattern)]
+    events = [
+        sup.update(k, np.zeros(2), np.zeros(2), NO_GAIN, None, c) for k, c in enumerate(pattern)
+    ]
     assert events == [None] * 9 + ["saturation"]
 
 
@@ -95,13 +110,15 @@ def test_hand_back_after_the_error_settles_for_the_dwell_and_the_dwell_doubles_o
     sup = Supervisor(config, 2, T)
     sup.hand_over("path_tolerance")
     assert sup.in_charge == FALLBACK
-    events = [sup.update(k, np.array([0.02 - 0.001 * k, 0.0]), **QUIET) for k in range(30)]
+    events = [
+        sup.update(k, np.array([0.02 - 0.001 * k, 0.0]), np.zeros(2), **QUIET) for k in range(30)
+    ]
     # settled from k = 10 (0.02 - 0.010); the 11th settled sample is past the 0.1 s dwell
     assert events.index("handback") == 20 and sup.in_charge == ADAPTIVE
     # tripped again soon after the hand-back: twice the dwell
     sup.hand_over("saturation")
     assert sup.dwell == 2.0
-    events = [sup.update(k, np.zeros(2), **QUIET) for k in range(100, 130)]
+    events = [sup.update(k, np.zeros(2), np.zeros(2), **QUIET) for k in range(100, 130)]
     assert events.index("handback") == 20
 
 

@@ -372,11 +372,11 @@ class RobotLoop:
         hand-over and 0.000 deg final error after the hand-back).
         """
         supervisor, k = self.supervisor, args[0]
-        error = args[1] - args[3]
+        error, error_qd = args[1] - args[3], args[2] - args[4]
         assert supervisor is not None and self.fallback is not None
         backup = self._update(self.fallback, args, u_n, applied)
         if supervisor.in_charge == FALLBACK:
-            if supervisor.update(k, error, self.law, None, False) is None:
+            if supervisor.update(k, error, error_qd, self.law, None, False) is None:
                 return backup
             out = self._update(self.law, args, u_n, applied)
             self.count("supervisor.handbacks")
@@ -390,7 +390,7 @@ class RobotLoop:
         if out is None:
             return None
         clipped = bool((np.abs(u_n + out.du) > self._limit).any())
-        trigger = supervisor.update(k, error, self.law, out.residual, clipped)
+        trigger = supervisor.update(k, error, error_qd, self.law, out.residual, clipped)
         if trigger is None:
             return out
         self.count(f"supervisor.{trigger}")

@@ -7,7 +7,9 @@ adaptive law's samples and trips, handing the joints to a fallback law (computed
 bounded on every arm measured), on the first of these triggers, each named:
 
 - ``tracking_error``: ``|q - q_d|`` on a joint beyond ``error_bound`` *and* larger than it
-  was ``error_growth_samples`` samples before: a growing error, not a constant offset. One
+  was ``error_growth_samples`` samples before, its rate ``|qd - qd_d|`` not smaller: an error
+  growing, not a constant offset nor an arm being brought to rest (a hold started on an arm
+  still sagging after a watchdog gap overshoots 2 deg while the law stops it). One
   bound for holds and moves, not a fraction of the path tolerance: a tolerance set tight on
   purpose (to abort a goal the arm cannot follow) would make it fire on a law that is fine;
   a joint beyond its path tolerance while moving hands over anyway (the loop's abort);
@@ -204,6 +206,7 @@ class Supervisor:
         self,
         k: int,
         error_q: np.ndarray,
+        error_qd: np.ndarray,
         law: Any,
         residual: np.ndarray | None,
         clipped: bool,
@@ -214,8 +217,8 @@ class Supervisor:
         ----------
         k : int
             Sample index.
-        error_q : (n,) ndarray
-            ``q - q_d`` (rad).
+        error_q, error_qd : (n,) ndarray
+            ``q - q_d`` (rad), ``qd - qd_d`` (rad/s).
         law : FeedbackLaw
             The adaptive law (its ``identified_input_gain`` and ``prior_input_gain``, where it
             has them, after this sample's update).
@@ -246,9 +249,9 @@ class Supervisor:
                 self._handback_k = k
                 return "handback"
             return None
-        self._errors.append(error)
+        self._errors.append((error, np.abs(error_qd)))
         trigger = (
-            self._tracking_error(error)
+            self._tracking_error()
             or self._input_gain(law)
             or self._residual(residual)
             or self._saturation(clipped)
@@ -273,11 +276,12 @@ class Supervisor:
         self._clear()
 
     # -- the triggers ---------------------------------------------------------------------------
-    def _tracking_error(self, error: np.ndarray) -> str | None:
+    def _tracking_error(self) -> str | None:
         errors = self._errors
         if len(errors) < errors.maxlen:
             return None
-        if ((error > self.bound) & (error > errors[0])).any():
+        (e_then, v_then), (e, v) = errors[0], errors[-1]
+        if ((e > self.bound) & (e > e_then) & (v >= v_then)).any():
             return "tracking_error"
         return None
 
