@@ -49,8 +49,9 @@ README's "Through the robot interface": the tuned PID oscillates on the Panda, 8
 ``Kp = 900``, ``Kv = 60`` (a double pole at -30 rad/s): with the paper's 100 / 20 it holds the
 PUMA 16.5 deg off under the payload it does not know, with 900 / 60 1.7 deg, with 2500 / 100
 the 10 ms driver's lag costs 4.7 deg. Supervised, every lost run above stays within 3.1 deg
-(PID fallback: 6.5-9.6 deg). Hand-back at 0.035 rad (2 deg) over 0.5 s: below computed
-torque's sag, so the adaptive law takes the arm back and removes it.
+(the PID fallback: 3.8 deg on the 4 ms driver's move). Hand-back at 0.035 rad (2 deg) over
+0.5 s: above computed torque's 1.7 deg sag, so the adaptive law takes the arm back and removes
+the sag (after a hand-over forced on a clean hold: 0.000 deg at the end).
 """
 
 from __future__ import annotations
