@@ -253,7 +253,7 @@ class Supervisor:
         self._errors.append((error, np.abs(error_qd)))
         trigger = (
             self._tracking_error()
-            or self._input_gain(law)
+            or self.input_gain(law)
             or self._residual(residual)
             or self._saturation(clipped)
         )
@@ -286,7 +286,9 @@ class Supervisor:
             return "tracking_error"
         return None
 
-    def _input_gain(self, law: Any) -> str | None:
+    def input_gain(self, law: Any) -> str | None:
+        """``"input_gain"`` if ``law``'s identified input gain is outside the region around its
+        prior (see the module docstring), else None (also for a law without one)."""
         prior = getattr(law, "prior_input_gain", None)
         if prior is None:
             return None
