@@ -37,6 +37,11 @@ Timing on ``/diagnostics`` (median, p99 and max over the last 1000 samples, in u
 its command's publish), ``sample_phase_*``, ``carry_*`` (how far states are carried to their
 sample's time) and ``driver_period_*`` (estimated from the stamps); see
 :class:`apc_feedback.robot_sampling.SampleTiming`.
+
+The adaptive law is supervised (``supervisor.*``, :mod:`apc_feedback.supervisor`): when it goes
+wrong a fallback law (computed torque by default) commands until the error settles, and every
+trigger and hand-over is counted (``supervisor.<trigger>``, ``supervisor.handovers``,
+``supervisor.handbacks``).
 """
 
 from __future__ import annotations
@@ -67,7 +72,8 @@ from apc_core.nodeutil import (
     reject,
     run_nodes,
 )
-from apc_core.params import ConfigError, Param, declare, params_from
+from apc_core.params import ConfigError, Param, declare, params_from, subset
+from apc_feedback.controller import FeedbackError
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -77,6 +83,7 @@ from apc_feedback.robot_sampling import (
     SampleTiming,
     StateRejectedError,
 )
+from apc_feedback.supervisor import Supervisor, SupervisorConfig, SupervisorError, fallback_law
 
 AUTOSTART_FLAG = "--autostart"
 
@@ -119,6 +126,7 @@ PARAMS: tuple[Param, ...] = (
         "largest |q - q_d| (rad) while a goal moves, one per joint or one for all; beyond it "
         "the goal is aborted and the measured position held; empty or 0 = no check",
     ),
+    *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
 )
 
@@ -190,14 +198,17 @@ class RobotNode(LifecycleNode):
         model = robot.model
         data = model.createData()
         self.joint_names = robot.joint_names
+        path_tolerance = _per_joint("path_tolerance", values["path_tolerance"], n)
+        supervision = self._supervision(values, robot)
         self.loop = RobotLoop(
             law=law,
             sampling=sampling,
             command=command,
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
-            path_tolerance=_per_joint("path_tolerance", values["path_tolerance"], n),
+            path_tolerance=path_tolerance,
             count=diag.count,
             log=self._log,
+            **supervision,
         )
         diag.timing = self.loop.timing
         self._sample_msg = JointState()
@@ -226,6 +237,26 @@ class RobotNode(LifecycleNode):
             f"configured: {n} joints, T = {values['period']} s, command on '{topic}' in "
             f"order {list(command_joints)}"
         )
+
+    @staticmethod
+    def _supervision(values: dict[str, Any], robot: Any) -> dict:
+        """The supervisor and its fallback law for the adaptive law (none for another law, or
+        with ``supervisor.enable`` false)."""
+        try:
+            config = SupervisorConfig.from_dict(subset(values, "supervisor."))
+        except SupervisorError as exc:
+            raise ConfigError(f"parameter 'supervisor.{exc.field}': {exc}") from None
+        if not config.enable or values["controller"] != "adaptive":
+            return {}
+        period = values["period"]
+        try:
+            fallback = fallback_law(config, robot, period, subset(values, "pid."))
+        except FeedbackError as exc:
+            raise ConfigError(f"parameter 'pid.{exc.field}': {exc}") from None
+        return {
+            "supervisor": Supervisor(config, robot.n_joints, period),
+            "fallback": fallback,
+        }
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.loop is not None

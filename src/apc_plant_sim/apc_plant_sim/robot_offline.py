@@ -15,7 +15,8 @@ chooses per command: the delay a drive or a network adds, on time or late. The 3
 from __future__ import annotations
 
 import heapq
-from collections.abc import Mapping, Sequence
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +29,7 @@ from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour, Quintic
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
@@ -70,12 +72,14 @@ class Latency:
 class RobotRun:
     """One run: the start position; per driver cycle (time ns, q), with the set point's q
     appended for the cycles whose state was a sample; the loop's timing figures at the end
-    (:meth:`apc_feedback.robot_sampling.SampleTiming.figures`, us) and its counters."""
+    (:meth:`apc_feedback.robot_sampling.SampleTiming.figures`, us), its counters and its logged
+    lines ``(level, text)``."""
 
     q0: np.ndarray
     log: list[tuple]
     timing: dict[str, float] = field(default_factory=dict)
-    counts: dict[str, int] = field(default_factory=dict)
+    counts: Counter = field(default_factory=Counter)
+    lines: list[tuple[str, str]] = field(default_factory=list)
 
     @property
     def q(self) -> np.ndarray:
@@ -101,6 +105,8 @@ def run_robot_loop(
     pause: tuple[float, float] | None = None,
     latency: Latency | None = None,
     settings: Mapping[str, Any] | None = None,
+    supervisor: SupervisorConfig | None = None,
+    setup: Callable[[RobotLoop], object] | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
 
@@ -123,6 +129,11 @@ def run_robot_loop(
         When commands reach the driver beyond its first cycle after they leave (default: at it).
     settings : mapping, optional
         The adaptive law's settings (default: the recommended preset).
+    supervisor : SupervisorConfig, optional
+        Supervise the adaptive law, with the fallback law it names (default: unsupervised).
+    setup : callable, optional
+        ``setup(loop)`` once the loop is built, before activation: to observe the law or to
+        make it go wrong (wrap ``loop.law.update``).
     """
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
@@ -131,16 +142,28 @@ def run_robot_loop(
     dt = round(driver_ms * MS)
     plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
     data = controller.model.createData()
+    counts: Counter = Counter()
+    lines: list[tuple[str, str]] = []
     config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=0.01))
-    counts: dict[str, int] = {}
+    tolerance = np.full(3, 0.2)
+    supervision = {}
+    if supervisor is not None and supervisor.enable:
+        supervision = {
+            "supervisor": Supervisor(supervisor, 3, 0.01),
+            "fallback": fallback_law(supervisor, controller, 0.01),
+        }
     loop = RobotLoop(
         law=AdaptiveFeedback(controller.model, config),
         sampling=RobotSamplingConfig(),
         command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
-        path_tolerance=np.full(3, 0.2),
-        count=lambda name: counts.__setitem__(name, counts.get(name, 0) + 1),
+        path_tolerance=tolerance,
+        count=lambda name: counts.update((name,)),
+        log=lambda level, text: lines.append((level, text)),
+        **supervision,
     )
+    if setup is not None:
+        setup(loop)
     latency = latency or Latency()
     transport = round(transport_ms * MS)
     ff: list = []  # [Feedforward, next k]
@@ -216,4 +239,4 @@ def run_robot_loop(
             handle(loop.tick(now), now)
             heapq.heappush(events, (now + T_NS, WATCHDOG, order, None))
         order += 1
-    return RobotRun(q0, log, loop.timing.figures(), counts)
+    return RobotRun(q0, log, loop.timing.figures(), counts, lines)
