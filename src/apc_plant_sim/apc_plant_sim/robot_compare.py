@@ -65,7 +65,6 @@ from apc_plant_sim.scenario import (
     Scenario,
     paper_scenario,
     paper_settings,
-    physical_settings,
     recommended_settings,
 )
 
@@ -79,6 +78,10 @@ PICKUP_AFTER_S = 0.5
 DRIVER_RATE_HZ = 500.0
 #: sim time: wall seconds robot_sim waits for a command before it steps without one.
 SIM_WAIT_S = 0.5
+#: robot_sim's ``command_latency`` (s): a command reaches the driver this long after the state
+#: it answers (a DDS hop and the law), so it is applied from the driver's next cycle, as on a
+#: robot's clock; in sim time without it a command would act over its own state's cycle.
+COMMAND_LATENCY_S = 0.0005
 
 #: What the report says about these runs, before the tables.
 SUMMARY = (
@@ -88,6 +91,8 @@ SUMMARY = (
     "`robot_node`, T = 10 ms), composed in one process on sim time. The arm holds "
     f"{HOLD_BEFORE_S:g} s, then the paper's move arrives as a goal on `feedforward/trajectory`; "
     "errors are the controllers' samples against their set points, from the move's start. "
+    f"Every command reaches the driver {COMMAND_LATENCY_S * 1e3:g} ms after the state it "
+    "answers, so it acts from the driver's next cycle, as on a robot's clock. "
     "`physical`: friction, rotor inertia, encoder quantisation, the velocity differenced by the "
     "drive from quantised positions over one driver period and a one-driver-period command "
     "delay, from each arm's data (apc_plant_sim/effects.py). The pickup: 5 lb picked up "
@@ -102,11 +107,8 @@ LAWS: dict[str, tuple[str, dict[str, Any] | None]] = {
     "PID": ("pid", None),
     "adaptive paper": ("adaptive", paper_settings()),
     "adaptive recommended": ("adaptive", recommended_settings()),
-    "adaptive physical": ("adaptive", physical_settings()),
 }
 BASELINES = ("computed torque", "PID")
-#: The preset for an arm behind a drive, run on the physical arm only.
-PHYSICAL_LAW = "adaptive physical"
 #: The robot-mode parameter file apc ships for each arm (in ``config/``).
 ROBOT_FILES = {"puma3": "puma560_3dof_robot.yaml", "panda": "panda_robot.yaml"}
 #: The law of the arm's robot file, run where it differs from the recommended preset.
@@ -200,8 +202,7 @@ def plan(
         for effects in EFFECTS
         for case in cases
         for law in (*LAWS, ROBOT_FILE_LAW)
-        if not (effects == "ideal" and law == PHYSICAL_LAW)
-        and (law != ROBOT_FILE_LAW or arm in own_file)
+        if law != ROBOT_FILE_LAW or arm in own_file
     ]
     if realtime:
         runs += [
@@ -266,6 +267,7 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
         "payload.at_s": float(sc.payload_at_s),
         "sim_time": sim,
         "sim_wait_s": SIM_WAIT_S,
+        "command_latency": COMMAND_LATENCY_S,
         "sim_cycles_per_command": round(DRIVER_RATE_HZ * period),
     }
     return {"feedforward_node": feedforward, "robot_node": robot_node, "robot_sim": robot_sim}
@@ -596,7 +598,7 @@ def report_section(cases: Sequence[RobotCase], results: Mapping[str, dict]) -> s
             )
     for key in ("max_error_deg", "final_error_deg"):
         parts.append(winners(cases, results, key))
-    for law in ("adaptive recommended", PHYSICAL_LAW, ROBOT_FILE_LAW):
+    for law in ("adaptive recommended", ROBOT_FILE_LAW):
         verdicts = beats_baselines(cases, results, law)
         if not verdicts:
             continue
