@@ -195,3 +195,16 @@ def test_a_missed_sample_at_the_moves_end_leaves_the_final_error_at_the_one_befo
         del table[(K0 + 14) * T_NS]
     out = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert out["completed"] and out["final_error_deg"] == pytest.approx([0.5, 0.0])
+
+
+def test_results_md_carries_the_table_when_results_json_has_the_part():
+    import report  # bench/report.py
+
+    runs = [_result([1.0, 0.25, 3.0], [0.1, 0.0, 0.4], False)]
+    cell = {"arm": "puma3", "effects": "ideal", "rate_hz": 100.0, "law": "PID", "runs": runs}
+    text = report.markdown(
+        {"robot_clock": {"cells": [{**cell, "summary": robot_clock.aggregate_cell(runs)}]}}
+    )
+    assert "## Robot path on wall time" in text
+    assert "| puma3 | ideal | 100 | PID | 0/1 / 0 | 1.00 0.25 3.00 |" in text
+    assert "Robot path on wall time" not in report.markdown({})
