@@ -36,9 +36,9 @@ Per cell: the worst max and final error per joint over its runs, the runs lost, 
 Written to ``bench/robot_clock.json`` and ``bench/robot_clock.md`` (and by ``run_all.py`` into
 ``results.json`` / ``results.md``), labelled with the machine and the other load on it.
 
-About 10-12 s per run on 2 cores (process start dominates): the full grid (48 cells x 3 runs)
-takes ~25-30 minutes; ``--quick`` is the PUMA with every physical effect on at 500 Hz, one run
-per law (~40 s).
+About 8-9 s per run on 2 cores (process start and discovery take half of it): the full grid
+(48 cells x 3 runs) takes ~20-25 minutes; ``--quick`` is the PUMA with every physical effect
+on at 500 Hz, one run per law (~25 s).
 
     .venv/bin/python bench/robot_clock.py                       # the full grid, 3 runs per cell
     .venv/bin/python bench/robot_clock.py --quick
@@ -185,7 +185,8 @@ def _worst(rows: list[list[float] | None]) -> list[float] | None:
 
 def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """One cell's runs summed up: the worst max and final error per joint over the runs that
-    did not fail, runs lost and failed, and every supervisor counter summed over the runs."""
+    did not fail, runs lost and failed, every supervisor counter summed over the runs, and the
+    most cores other jobs used during one of them (None when no run says)."""
     done = [r for r in runs if not r.get("failed")]
     supervisor: dict[str, int] = {}
     for r in done:
@@ -198,7 +199,13 @@ def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "worst_max_error_deg": _worst([r.get("max_error_deg") for r in done]),
         "worst_final_error_deg": _worst([r.get("final_error_deg") for r in done]),
         "supervisor": supervisor,
+        "other_cores_max": max(other) if (other := _other_cores(runs)) else None,
     }
+
+
+def _other_cores(runs: Sequence[Mapping[str, Any]]) -> list[float]:
+    loads = [(r.get("machine_load") or {}).get("other_cores") for r in runs]
+    return [float(v) for v in loads if v is not None]
 
 
 def _degrees(values: Sequence[float] | None) -> str:
@@ -225,8 +232,8 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
         "finished; hand-overs / hand-backs: the supervisor's, summed over the runs.",
         "",
         "| arm | effects | driver Hz | law | runs lost / failed | max error | final error "
-        "| hand-overs / hand-backs | other supervisor counts |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| hand-overs / hand-backs | other supervisor counts | other jobs (cores, worst run) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for cell in result.get("cells", []):
         s = cell["summary"]
@@ -236,7 +243,8 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
         lines.append(
             f"| {cell['arm']} | {cell['effects']} | {cell['rate_hz']:g} | {cell['law']} "
             f"| {s['lost']}/{s['runs']} / {s['failed']} | {_degrees(s['worst_max_error_deg'])} "
-            f"| {_degrees(s['worst_final_error_deg'])} | {over} / {back} | {others or '-'} |"
+            f"| {_degrees(s['worst_final_error_deg'])} | {over} / {back} | {others or '-'} "
+            f"| {'-' if s.get('other_cores_max') is None else s['other_cores_max']} |"
         )
     failures = [
         f"- {c['arm']} {c['effects']} {c['rate_hz']:g} Hz {c['law']} run {i + 1}: {r['failed']}"

@@ -15,7 +15,7 @@ Parts, in this order (each also runs alone and then merges its figures into resu
 
 Every DDS participant runs on a random ``ROS_DOMAIN_ID``, localhost only; every process
 started is stopped. Parts 1-5 take about 7-8 minutes on 2 cores, under 10; ``robot_clock``'s
-full grid (48 cells x 3 runs of ~10 s) 25-30 more (``--quick``: about 4 + 0.5). No
+full grid (48 cells x 3 runs of ~8-9 s) 20-25 more (``--quick``: about 4 + 0.5). No
 figure is asserted: the Markdown table compares them with apc's targets and the paper's
 7.5 ms.
 

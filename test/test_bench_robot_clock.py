@@ -122,6 +122,9 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
     assert cell["worst_max_error_deg"] == pytest.approx([1.0, 0.9, 12.0])
     assert cell["worst_final_error_deg"] == pytest.approx([0.3, 0.0, 0.4])
     assert cell["supervisor"] == {"supervisor.handovers": 1, "supervisor.handbacks": 1}
+    assert cell["other_cores_max"] is None  # no run said how busy the machine was
+    runs[0]["machine_load"], runs[1]["machine_load"] = {"other_cores": 0.3}, {"other_cores": 0.9}
+    assert robot_clock.aggregate_cell(runs)["other_cores_max"] == 0.9
 
     nothing = robot_clock.aggregate_cell([runs[3]])
     assert nothing["worst_max_error_deg"] is None and nothing["lost"] == 0
@@ -151,7 +154,7 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
     text = robot_clock.markdown(result)
     assert "Wall time" in text and "Test CPU 9000, 2 cores" in text and "0.4 cores" in text
     row = "| puma3 | physical | 250 | adaptive recommended | 0/2 / 1 | 1.00 0.25 3.00 "
-    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - |" in text
+    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | - |" in text
     assert "puma3 physical 250 Hz adaptive recommended run 2: robot_node refused" in text
 
 
