@@ -161,6 +161,8 @@ def is_lost(errors: Mapping[str, Any], limit_deg: float = LOST_DEG) -> bool:
     return bool(np.any(~(np.asarray(worst, dtype=float) <= limit_deg)))
 
 
+#: robot_node's counters of the wall clock's faults, summed per cell in the table (absent = 0).
+TIMING_COUNTERS = ("missed_samples", "missed_setpoint", "stale", "watchdog")
 #: The supervisor's counters every result carries (absent from the diagnostics = 0).
 SUPERVISOR_KEYS = ("supervisor.handovers", "supervisor.handbacks")
 
@@ -185,8 +187,9 @@ def _worst(rows: list[list[float] | None]) -> list[float] | None:
 
 def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """One cell's runs summed up: the worst max and final error per joint over the runs that
-    did not fail, runs lost and failed, every supervisor counter summed over the runs, and the
-    most cores other jobs used during one of them (None when no run says)."""
+    did not fail, runs lost and failed, every supervisor counter and robot_node's
+    :data:`TIMING_COUNTERS` summed over the runs, and the most cores other jobs used during one
+    of them (None when no run says)."""
     done = [r for r in runs if not r.get("failed")]
     supervisor: dict[str, int] = {}
     for r in done:
@@ -199,6 +202,10 @@ def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "worst_max_error_deg": _worst([r.get("max_error_deg") for r in done]),
         "worst_final_error_deg": _worst([r.get("final_error_deg") for r in done]),
         "supervisor": supervisor,
+        "timing_faults": {
+            k: sum(int((r.get("robot_node_counters") or {}).get(k, 0)) for r in done)
+            for k in TIMING_COUNTERS
+        },
         "other_cores_max": max(other) if (other := _other_cores(runs)) else None,
     }
 
@@ -232,18 +239,22 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
         "finished; hand-overs / hand-backs: the supervisor's, summed over the runs.",
         "",
         "| arm | effects | driver Hz | law | runs lost / failed | max error | final error "
-        "| hand-overs / hand-backs | other supervisor counts | other jobs (cores, worst run) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| hand-overs / hand-backs | other supervisor counts | "
+        + " / ".join(k.replace("_", " ") for k in TIMING_COUNTERS)
+        + " | other jobs (cores, worst run) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for cell in result.get("cells", []):
         s = cell["summary"]
         sup = dict(s.get("supervisor") or {})
         over, back = (sup.pop(k, 0) for k in SUPERVISOR_KEYS)
         others = ", ".join(f"{k.removeprefix('supervisor.')} {v}" for k, v in sorted(sup.items()))
+        faults = " / ".join(str((s.get("timing_faults") or {}).get(k, 0)) for k in TIMING_COUNTERS)
         lines.append(
             f"| {cell['arm']} | {cell['effects']} | {cell['rate_hz']:g} | {cell['law']} "
             f"| {s['lost']}/{s['runs']} / {s['failed']} | {_degrees(s['worst_max_error_deg'])} "
             f"| {_degrees(s['worst_final_error_deg'])} | {over} / {back} | {others or '-'} "
+            f"| {faults} "
             f"| {'-' if s.get('other_cores_max') is None else s['other_cores_max']} |"
         )
     failures = [

@@ -112,8 +112,11 @@ def _result(max_deg, final_deg, lost, handovers=0, failed=None) -> dict:
 
 def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_runs():
     runs = [
-        _result([1.0, 0.2, 3.0], [0.1, 0.0, 0.4], False),
-        _result([0.5, 0.9, 12.0], [0.3, 0.0, 0.1], True, handovers=1),
+        {**_result([1.0, 0.2, 3.0], [0.1, 0.0, 0.4], False), "robot_node_counters": {"stale": 2}},
+        {
+            **_result([0.5, 0.9, 12.0], [0.3, 0.0, 0.1], True, handovers=1),
+            "robot_node_counters": {"missed_samples": 1, "stale": 1, "samples_taken": 300},
+        },
         _result([0.7, 0.1, 2.0], None, True),  # move not finished: no final error
         {"failed": "timed out after 60 s waiting for the feedforward", "lost": None},
     ]
@@ -122,6 +125,12 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
     assert cell["worst_max_error_deg"] == pytest.approx([1.0, 0.9, 12.0])
     assert cell["worst_final_error_deg"] == pytest.approx([0.3, 0.0, 0.4])
     assert cell["supervisor"] == {"supervisor.handovers": 1, "supervisor.handbacks": 1}
+    assert cell["timing_faults"] == {
+        "missed_samples": 1,
+        "missed_setpoint": 0,
+        "stale": 3,
+        "watchdog": 0,
+    }
     assert cell["other_cores_max"] is None  # no run said how busy the machine was
     runs[0]["machine_load"], runs[1]["machine_load"] = {"other_cores": 0.3}, {"other_cores": 0.9}
     assert robot_clock.aggregate_cell(runs)["other_cores_max"] == 0.9
@@ -154,7 +163,7 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
     text = robot_clock.markdown(result)
     assert "Wall time" in text and "Test CPU 9000, 2 cores" in text and "0.4 cores" in text
     row = "| puma3 | physical | 250 | adaptive recommended | 0/2 / 1 | 1.00 0.25 3.00 "
-    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | - |" in text
+    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | 0 / 0 / 0 / 0 | - |" in text
     assert "puma3 physical 250 Hz adaptive recommended run 2: robot_node refused" in text
 
 
