@@ -106,6 +106,7 @@ def run_errors(
     qd_d: Mapping[int, Sequence[float]],
     period_ns: int,
     move_s: float,
+    limit_deg: float = LOST_DEG,
 ) -> dict[str, Any]:
     """Tracking error of one run from the samples ``q`` and set points ``q_d``, ``qd_d`` (rad,
     rad/s), each keyed by its stamp (ns, on the sample grid kT).
@@ -115,7 +116,9 @@ def run_errors(
     error per joint over the move and the error at its end (deg; None when the move's end was
     not sampled; else at the last paired sample up to it, should the end's own sample be
     missed), ``run_max_error_deg`` over every paired sample (a non-finite position counts
-    as an infinite error), and whether the move started and was sampled to its end.
+    as an infinite error), whether the move started and was sampled to its end, and
+    ``beyond_limit_at_s``: when a joint's error first went beyond ``limit_deg``, in s from the
+    move's start (negative: in the hold before it; None: never, or no move to time it from).
     """
     stamps = sorted(set(q) & set(q_d))
     if not stamps:
@@ -126,6 +129,7 @@ def run_errors(
             "max_error_deg": None,
             "final_error_deg": None,
             "run_max_error_deg": None,
+            "beyond_limit_at_s": None,
         }
     measured = np.asarray([q[s] for s in stamps], dtype=float)
     planned = np.asarray([q_d[s] for s in stamps], dtype=float)
@@ -139,10 +143,14 @@ def run_errors(
         "max_error_deg": None,
         "final_error_deg": None,
         "run_max_error_deg": err.max(axis=0).tolist(),
+        "beyond_limit_at_s": None,
     }
     if not moving:
         return out
     start = stamps[max(moving[0] - 1, 0)]
+    beyond = np.flatnonzero(np.any(err > limit_deg, axis=1))
+    if beyond.size:
+        out["beyond_limit_at_s"] = (stamps[int(beyond[0])] - start) * 1e-9
     end = start + round(move_s * 1e9 / period_ns) * period_ns
     rows = [i for i, s in enumerate(stamps) if start <= s <= end]
     out["max_error_deg"] = err[rows].max(axis=0).tolist()
@@ -543,11 +551,14 @@ class WallRun:
                 got = [obs.status_of(name) for name in ("robot_node", "robot_sim")]
                 return all(status is not None and status[0] > end for status in got)
 
-            self._spin_until(
-                executor, fresh_status, DIAGNOSTICS_WAIT_S, "waiting for the nodes' diagnostics"
-            )
+            # Counters only go up: a status from before the end (one lost) still counts most.
+            deadline = time.monotonic() + DIAGNOSTICS_WAIT_S
+            while not fresh_status() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.01)
             status, sim_status = obs.status_of("robot_node"), obs.status_of("robot_sim")
-            values = status[1] if status else {}
+            if status is None:
+                raise RuntimeError("no /diagnostics from robot_node: hand-overs unknown")
+            values = status[1]
             errors = run_errors(*obs.paired(), round(scenario.period * 1e9), scenario.duration)
             return {
                 **errors,
@@ -555,6 +566,7 @@ class WallRun:
                 "supervisor": supervisor_counts(values),
                 "robot_node_counters": _counters(values),
                 "robot_sim_counters": _counters(sim_status[1]) if sim_status else {},
+                "diagnostics_after_end": fresh_status(),
             }
         finally:
             executor.remove_node(obs.node)
@@ -588,9 +600,11 @@ def _progress_line(spec: RunSpec, runs: int, r: Mapping[str, Any]) -> str:
     if r.get("failed"):
         return f"{head}: FAILED {r['failed'].splitlines()[0]}; {tail}"
     sup = r.get("supervisor") or {}
+    at = r.get("beyond_limit_at_s")
+    lost = f" LOST (beyond {LOST_DEG:g} deg at {at:+.2f} s)" if at is not None else " LOST"
     return (
         f"{head}: max {_degrees(r.get('max_error_deg'))} final "
-        f"{_degrees(r.get('final_error_deg'))} deg{' LOST' if r.get('lost') else ''}; "
+        f"{_degrees(r.get('final_error_deg'))} deg{lost if r.get('lost') else ''}; "
         f"hand-overs {sup.get('supervisor.handovers', 0)}; {tail}"
     )
 
@@ -604,8 +618,10 @@ def run(
     laws: Sequence[str] | None = None,
     runs: int | None = None,
     seed: int = 0,
+    logs: Path | None = None,
 ) -> dict[str, Any]:
-    """Every cell (``quick``: :data:`QUICK`'s), ``runs`` runs each; {"robot_clock": result}."""
+    """Every cell (``quick``: :data:`QUICK`'s), ``runs`` runs each; {"robot_clock": result}.
+    Node logs and parameter files go to ``logs`` (kept) or a temporary directory."""
     benchlib.isolate_dds()
     base: dict[str, Any] = QUICK if quick else {
         "arms": ARMS, "effects": EFFECTS, "rates": RATES_HZ, "runs": 3
@@ -638,11 +654,13 @@ def run(
         "cells": [],
     }
     with tempfile.TemporaryDirectory(prefix="apc_robot_clock_") as tmp:
+        workdir = Path(logs) if logs else Path(tmp)
+        workdir.mkdir(parents=True, exist_ok=True)
         for arm, eff, rate, law in plan(arms, effects, rates, laws):
             cell_runs = []
             for i in range(runs):
                 spec = RunSpec(arm, eff, rate, law, i, rng.uniform(0.0, 1.0 / rate))
-                r = run_one(Path(tmp), spec)
+                r = run_one(workdir, spec)
                 benchlib.progress(_progress_line(spec, runs, r))
                 cell_runs.append(r)
             result["cells"].append(
@@ -670,6 +688,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--laws", nargs="+", choices=tuple(LAWS))
     parser.add_argument("--runs", type=int, help="runs per cell (default 3; --quick 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the activation phases")
+    parser.add_argument("--logs", type=Path, help="keep the node logs in this directory")
     parser.add_argument("--json", type=Path, default=RESULTS_JSON, help="where the JSON goes")
     parser.add_argument("--md", type=Path, default=RESULTS_MD, help="where the table goes")
     parser.add_argument("--no-write", action="store_true", help="print only")
@@ -682,6 +701,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         laws=args.laws,
         runs=args.runs,
         seed=args.seed,
+        logs=args.logs,
     )["robot_clock"]
     text = markdown(out)
     print(text)

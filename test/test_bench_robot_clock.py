@@ -46,7 +46,10 @@ def test_errors_span_the_move_from_the_sample_before_it_to_its_planned_end():
     assert out["final_error_deg"] == pytest.approx([0.1, 0.2])  # sample 14 = 4 + 10
     # ... but not outside the run's.
     assert out["run_max_error_deg"] == pytest.approx([4.0, 1.0])
-    assert not robot_clock.is_lost(out)
+    assert not robot_clock.is_lost(out) and out["beyond_limit_at_s"] is None
+    assert robot_clock.run_errors(q, q_d, qd_d, T_NS, 0.1, limit_deg=2.5)[
+        "beyond_limit_at_s"
+    ] == pytest.approx(-0.02)  # sample 2, in the hold before the move
 
 
 def test_a_run_is_lost_beyond_ten_degrees_anywhere_or_when_its_move_end_is_never_sampled():
@@ -54,6 +57,7 @@ def test_a_run_is_lost_beyond_ten_degrees_anywhere_or_when_its_move_end_is_never
     after_the_move = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert after_the_move["max_error_deg"] == pytest.approx([0.0, 0.0])
     assert robot_clock.is_lost(after_the_move)
+    assert after_the_move["beyond_limit_at_s"] == pytest.approx(0.13)  # sample 17 - 4
 
     q, q_d, qd_d = _run({}, range(5, 14), range(12))  # samples stop before the move's end
     cut = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
