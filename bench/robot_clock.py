@@ -43,6 +43,7 @@ on at 500 Hz, one run per law (~25 s).
     .venv/bin/python bench/robot_clock.py                       # the full grid, 3 runs per cell
     .venv/bin/python bench/robot_clock.py --quick
     .venv/bin/python bench/robot_clock.py --arms puma3 --effects ideal --rates 100 1000 --runs 1
+    .venv/bin/python bench/robot_clock.py --quick --logs LOGDIR --json OUT.json --md OUT.md
 """
 
 from __future__ import annotations
