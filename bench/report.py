@@ -358,6 +358,12 @@ def markdown(d: dict[str, Any]) -> str:
             rows,
         )
 
+    clock = d.get("robot_clock")
+    if clock:
+        import robot_clock  # bench/robot_clock.py (bench/ is on sys.path)
+
+        lines += ["", robot_clock.markdown(clock, heading="##").rstrip()]
+
     ma = d.get("multi_arm")
     if ma:
         lines += ["", "## Several arms at 100 Hz in one ROS domain (late fraction per arm)", ""]
