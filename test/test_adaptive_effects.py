@@ -89,7 +89,7 @@ def test_bad_options_are_named():
 
 
 def test_physical_preset_beats_both_baselines_with_every_effect_on():
-    """Case (a), all PUMA 560 effects on (measured max 0.67/0.91/1.93 deg against PID's
+    """Case (a), all PUMA 560 effects on (measured max 0.33/0.89/1.60 deg against PID's
     1.63/2.77/5.81 and computed torque's 4.42/20.5/55.8)."""
     scenario = paper_scenario("a")
     end = scenario.move_end_sample
