@@ -79,7 +79,10 @@ LAWS: dict[str, str] = {
     "computed torque": "computed_torque",
     "PID": "pid",
     "adaptive recommended": "adaptive",
+    "adaptive robot file": "adaptive",
 }
+#: The robot file as shipped, run only for an arm whose file sets ``adaptive.*`` values.
+ROBOT_FILE_LAW = "adaptive robot file"
 #: The ``--quick`` subset (``make bench BENCH_ARGS=--quick``): one driver, every law, one run.
 QUICK = {"arms": ("puma3",), "effects": ("physical",), "rates": (500.0,), "runs": 1}
 
@@ -280,8 +283,16 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
 def plan(
     arms: Sequence[str], effects: Sequence[str], rates: Sequence[float], laws: Sequence[str]
 ) -> list[tuple[str, str, float, str]]:
-    """The cells in the order they run: (arm, effects, driver rate, law)."""
-    return [(a, e, float(r), law) for a in arms for e in effects for r in rates for law in laws]
+    """The cells in the order they run: (arm, effects, driver rate, law); the robot file's law
+    only for an arm whose file differs from the preset."""
+    return [
+        (a, e, float(r), law)
+        for a in arms
+        for e in effects
+        for r in rates
+        for law in laws
+        if law != ROBOT_FILE_LAW or robot_file_overrides(a)
+    ]
 
 
 def robot_file_overrides(arm: str) -> dict[str, Any]:
@@ -305,7 +316,7 @@ def controller_arguments(arm: str, law: str) -> list[str]:
         "controller": controller,
         "path_tolerance": PATH_TOLERANCE,
     }
-    if controller == "adaptive":
+    if law == "adaptive recommended":
         values.update(robot_file_overrides(arm))
     args: list[str] = []
     for key, value in values.items():
@@ -323,6 +334,7 @@ def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, An
     params.update(
         state_rate=float(rate_hz),
         sim_time=False,
+        command_latency=0.0,  # wall time: the transport is real
         sim_cycles_per_command=round(rate_hz * period),
     )
     return params

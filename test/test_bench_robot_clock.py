@@ -175,8 +175,10 @@ def test_the_plan_covers_every_rate_arm_effect_and_law():
     cells = robot_clock.plan(
         robot_clock.ARMS, robot_clock.EFFECTS, robot_clock.RATES_HZ, tuple(robot_clock.LAWS)
     )
-    assert len(cells) == len(set(cells)) == 4 * 2 * 2 * 3
+    # three laws everywhere, the robot file's own law on the Panda only (its q_velocity)
+    assert len(cells) == len(set(cells)) == 4 * 2 * 2 * 3 + 4 * 2
     assert {c[2] for c in cells} == {100.0, 250.0, 500.0, 1000.0}
+    assert {c[0] for c in cells if c[3] == robot_clock.ROBOT_FILE_LAW} == {"panda"}
 
 
 def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override():
@@ -189,6 +191,8 @@ def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override()
     assert f"robot_node:adaptive.q_velocity:={preset!r}" in args
     assert 'robot_node:controller:="adaptive"' in args
     assert "robot_node:autostart:=false" in args and "robot_node:path_tolerance:=[0.0]" in args
+    shipped = robot_clock.controller_arguments("panda", robot_clock.ROBOT_FILE_LAW)
+    assert not any("adaptive." in a for a in shipped)  # the file's own values stand
     pid = robot_clock.controller_arguments("panda", "PID")
     assert 'robot_node:controller:="pid"' in pid
     assert not any("adaptive." in a for a in pid)
