@@ -53,12 +53,9 @@ commands nothing: another one may take the joints over).
 The driver's rate. A command reaches the arm at the driver's next write after it arrives: the
 samples are the driver's states and the command leaves in the state's callback, so the torque
 computed from a state is applied one driver period (plus the command's trip) after it, the
-same delay at every sample and in every run. Eq. 16 has no such delay. Measured with this loop
-closed around apc's plant (the PUMA, 5 lb payload, recommended preset, the paper's move,
-``apc_plant_sim.robot_offline``, states 0.3 ms on the way): drivers at 1 kHz, 500, 400 and
-333 Hz track within 0.23 deg, 250 Hz within 9 deg; at 200 and 100 Hz (a torque applied 5 or
-10 ms after its state) the adaptive law diverges. Run the driver (ros2_control's
-``update_rate``) at 500 Hz or more.
+same delay at every sample and in every run. Eq. 16 has no such delay; a law that models it
+(``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start and learns the
+rest (README, "A robot's clock", for what each driver rate measures).
 """
 
 from __future__ import annotations
