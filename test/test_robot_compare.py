@@ -158,13 +158,14 @@ def test_report_says_who_wins_and_where_the_goal_fails():
 @pytest.mark.ros
 def test_one_run_through_the_robot_interface_with_every_effect_on(tmp_path):
     """MuJoCo's PUMA with friction, rotor inertia, quantisation, a differenced velocity and a
-    one-period delay, driven through /joint_states and /effort_controller/commands in sim time:
-    the recommended preset tracks the 5 lb move (measured: max 0.41 / 0.46 / 0.74 deg, final
-    0.050 / 0.036 / 0.055 deg; bit for bit the same in every run)."""
+    one-period delay, driven through /joint_states and /effort_controller/commands in sim time,
+    every command 0.5 ms on its way (it acts from the driver's next cycle): the recommended
+    preset tracks the 5 lb move without a hand-over (measured: max 0.94 / 0.81 / 1.35 deg,
+    final 0.010 / 0.026 / 0.008 deg)."""
     case = rc.RobotCase("puma3", "c", "physical", "adaptive recommended")
     outcome = rc.run_case(case, tmp_path, timeout_s=60.0)
     assert outcome.ok, outcome.message
     metrics = rc.measure(outcome.path)
-    assert max(metrics["max_error_deg"]) < 1.5
+    assert max(metrics["max_error_deg"]) < 2.0
     assert max(metrics["final_error_deg"]) < 0.15
     assert metrics["samples"] == 151  # the move and the hold after it

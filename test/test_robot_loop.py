@@ -29,7 +29,9 @@ def _state(stamp, q, qd=0.0):
     return JointSample(stamp, np.full(2, float(q)), np.full(2, float(qd)), None)
 
 
-def _loop(tolerance=0.0, limit=(100.0, 100.0), command_joints=("b", "a")):
+def _loop(tolerance=0.0, limit=(100.0, 100.0), command_joints=("b", "a"), before=99 * T):
+    """A loop with a PD law; ``before``: the stamp of a state the driver published before
+    activation (its period is then known at the first start), or None for none."""
     counts: Counter = Counter()
     logs: list = []
     loop = RobotLoop(
@@ -41,6 +43,8 @@ def _loop(tolerance=0.0, limit=(100.0, 100.0), command_joints=("b", "a")):
         count=lambda name: counts.update([name]),
         log=lambda level, text: logs.append((level, text)),
     )
+    if before is not None:
+        loop.on_joint_state(_state(before, 0.0), before)
     return loop, counts, logs
 
 
@@ -79,8 +83,8 @@ def test_activation_is_a_start_and_the_law_runs_when_its_setpoint_arrives():
 def test_the_command_of_sample_k_leaves_in_the_callback_of_its_state():
     """A 1 kHz driver: the states at the samples' times give the sample and its command at
     once, the nine between them nothing; the command's state is the sample's."""
-    loop, counts, _ = _loop()
     phase = 4 * MS
+    loop, counts, _ = _loop(before=100 * T + phase - MS)
     loop.activate(100 * T)
     law_positions = []
     update = loop.law.update
@@ -195,7 +199,7 @@ def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fres
 
 
 def test_waiting_for_the_first_state_is_not_a_fault():
-    loop, counts, _ = _loop()
+    loop, counts, _ = _loop(before=None)
     loop.activate(100 * T)
     assert loop.tick(100 * T) == NOTHING
     assert counts["no_state"] == 1 and counts["watchdog"] == 0
@@ -223,7 +227,7 @@ def test_path_tolerance_aborts_a_moving_setpoint_and_restarts_at_the_measured_po
 
 
 def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
-    loop, _, _ = _loop()
+    loop, _, _ = _loop(before=None)
     assert loop.deactivate() is None  # never measured: nothing to hold
     t = 100 * T
     loop.activate(t)
@@ -315,3 +319,16 @@ def test_closed_loop_timing_figures():
     assert 0.0 < run.timing["carry_max_us"] <= 1000.0 / 333 / 2 * 1e3
     assert "missed_samples" not in run.counts
     assert run.max_tracking_error_deg() < 0.3
+
+
+def test_the_first_start_waits_for_the_drivers_period():
+    """Activated before any state: the first state locks the phase, the start waits for the
+    second (the driver's period is what a law that models its delay and the fallback's gains
+    are set from), then holds the position measured then."""
+    loop, counts, _ = _loop(before=None)
+    loop.activate(100 * T)
+    assert loop.on_joint_state(_state(100 * T, 0.0), 100 * T) == NOTHING
+    assert counts["start_waits_for_driver_period"] == 1
+    step = loop.on_joint_state(_state(101 * T, 0.01), 101 * T)
+    assert step.start and step.sample.stamp_ns == 101 * T
+    assert loop.sampler.driver_period_ns == T

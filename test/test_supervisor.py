@@ -189,6 +189,7 @@ def test_a_path_tolerance_abort_hands_the_hold_to_the_fallback_if_the_law_is_uns
         sp = SetpointStamped(k * tick, q * v, qd * v, 0 * v, 0 * v, 0)
         return loop.on_setpoint(sp, start=start)
 
+    state(99, 0.0)  # the driver publishes before activation: its period is known
     loop.activate(100 * tick)
     assert state(100, 0.0).start
     assert setpoint(100, 0.0, start=True).command.tolist() == [0.0, 0.0]
@@ -248,9 +249,10 @@ def test_the_fallback_holds_an_arm_whose_input_gain_is_forced_wrong_and_hands_ba
 
 def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_with_it():
     """A 100 Hz driver with 30 % of commands 6 ms late and Eq. 16's model (no input lags): the
-    hold is lost (128 deg); supervised it stays within 8 deg (measured 7.9: three hand-overs,
-    the first when the error passes suspicion_error with the command clipped, each hand-back
-    after twice the dwell of the one before; computed torque sags under the unknown 5 lb)."""
+    hold is lost (128 deg); supervised it stays within 10 deg (measured 8.7: the fallback's
+    computed torque sags under the unknown 5 lb with the gains a 100 Hz driver allows, Kp 400
+    and Kv 40, where Kp 900 lost the Panda's wrist; three hand-overs, each hand-back after twice
+    the dwell of the one before)."""
     late = dict(driver_ms=10.0, settings=EQ16)
     lost = run_robot_loop(2.0, latency=Latency(late_ms=6.0, probability=0.3), **late)
     assert lost.max_deviation_deg() > 90.0
@@ -258,7 +260,7 @@ def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_
         3.0, latency=Latency(late_ms=6.0, probability=0.3), supervisor=SupervisorConfig(), **late
     )
     assert held.counts["supervisor.handovers"] >= 1
-    assert held.max_deviation_deg() < 9.0
+    assert held.max_deviation_deg() < 10.0
 
 
 def test_a_move_on_a_slow_driver_is_held_by_the_fallback_with_the_pid_too():

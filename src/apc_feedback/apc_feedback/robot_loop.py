@@ -69,7 +69,7 @@ import numpy as np
 from apc_core.wire import JointSample, SetpointStamped
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
-from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor
+from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 
 #: Samples a start waits for the set point that answers it before it is sent again: a start
 #: published before the feedforward's subscription matched (DDS discovery) is lost, and without
@@ -229,6 +229,11 @@ class RobotLoop:
             self.count("watchdog_recovered")
             self.log("warn", f"sample {take.k}: joint states back; holding the measured position")
         if self._restart:
+            if sampler.driver_period_ns <= 0:
+                # The start tells the law and the fallback the driver's period (the delay a
+                # command meets): it waits for the second state, which gives the period.
+                self.count("start_waits_for_driver_period")
+                return NOTHING
             return self._start(sample)
         waiting = self._start_stamp is not None
         if waiting and sample.stamp_ns - self._start_stamp >= START_RESEND_SAMPLES * self.period_ns:
@@ -314,9 +319,13 @@ class RobotLoop:
         next write (ros2_control's read, update, write cycle); what a drive or the transport
         add beyond that the identified lags learn.
         """
+        driver_period = self.sampler.driver_period_ns * 1e-9
         expect = getattr(self.law, "expect_input_delay", None)
-        if expect is not None and self.sampler.driver_period_ns > 0:
-            expect(self.sampler.driver_period_ns * 1e-9)
+        if expect is not None and driver_period > 0.0:
+            expect(driver_period)
+        if self.supervisor is not None and driver_period > 0.0:
+            if self.fallback is not None and self.fallback.kind == "computed_torque":
+                self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
         self._restart = False
         self._start_stamp = sample.stamp_ns
         self._setpoints.clear()

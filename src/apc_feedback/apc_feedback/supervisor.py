@@ -32,7 +32,10 @@ start, made a residual jump and took Ĝ's diagonal to 3 % of Eq. 33's, and compu
 holding instead cost 7 deg. So those wait for the error.
 
 While the fallback is in charge the supervisor waits for the error to settle (every joint
-within ``settle_error`` for ``settle_time``) and then hands the joints back. The caller
+within ``settle_error`` and moving off its set point no faster than ``settle_rate``, for
+``settle_time``) and then hands the joints back. Settled, not small: the fallback does not
+know a payload and holds it with a steady offset (computed torque on the Panda's wrist under
+5 lb: 2.6 deg), which the adaptive law, once back, removes. The caller
 (:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips, so
 identification restarts from Eq. 33.
 
@@ -53,13 +56,17 @@ README's "Through the robot interface": the tuned PID oscillates on the Panda, 8
 ``Kp = 900``, ``Kv = 60`` (a double pole at -30 rad/s): with the paper's 100 / 20 it holds the
 PUMA 16.5 deg off under the payload it does not know, with 900 / 60 1.7 deg, with 2500 / 100
 the 10 ms driver's lag costs 4.7 deg. Supervised, every lost run above stays within 3.1 deg
-(the PID fallback: 3.8 deg on the 4 ms driver's move). Hand-back at 0.035 rad (2 deg) over
-0.5 s: above computed torque's 1.7 deg sag, so the adaptive law takes the arm back and removes
-the sag (after a hand-over forced on a clean hold: 0.000 deg at the end).
+(the PID fallback: 3.8 deg on the 4 ms driver's move). Hand-back once every joint is within
+0.1 rad (5.7 deg) and slower than 0.02 rad/s off its set point for 0.5 s: a steady fallback,
+whatever its offset (computed torque's sag under a payload it does not know: 1.7 deg on the
+PUMA, 2.6 deg on the Panda's wrist, where a bound of 2 deg kept the fallback in charge for
+good on wall time), so the adaptive law takes the arm back and removes the sag (after a
+hand-over forced on a clean hold: 0.000 deg at the end).
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -69,6 +76,7 @@ import numpy as np
 
 from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Robot
+from apc_feedback.baselines import PdGains
 from apc_feedback.controller import FeedbackLaw
 from apc_feedback.laws import make_law
 
@@ -155,12 +163,25 @@ class SupervisorConfig:
         1,
         10000,
     )
+    fallback_bandwidth: float = setting(
+        0.2,
+        "computed-torque fallback: its natural frequency at most this over the driver period "
+        "(rad), Kp and Kv lowered together",
+        1e-3,
+        100.0,
+    )
     settle_error: float = setting(
-        0.035,
+        0.15,
         "hand-back: every |q - q_d| within this (rad) for settle_time gives the adaptive law the "
         "joints again",
         1e-6,
         10.0,
+    )
+    settle_rate: float = setting(
+        0.02,
+        "hand-back: every |qd - qd_d| within this (rad/s) for settle_time as well",
+        1e-6,
+        100.0,
     )
     settle_time: float = setting(
         0.5,
@@ -258,9 +279,11 @@ class Supervisor:
             self._clipped_run = self._settled_run = 0
         self._k_prev = k
         if self.in_charge == FALLBACK:
-            self._settled_run = (
-                self._settled_run + 1 if (error <= self.config.settle_error).all() else 0
-            )
+            config = self.config
+            settled = (error <= config.settle_error).all() and (
+                np.abs(error_qd) <= config.settle_rate
+            ).all()
+            self._settled_run = self._settled_run + 1 if settled else 0
             if self._settled_run > self._settle_samples << min(self._streak, 6):
                 self.in_charge, self.reason = ADAPTIVE, ""
                 self._clear()
@@ -352,6 +375,23 @@ class Supervisor:
         if self._clipped_run >= self.config.saturation_samples:
             return "saturation"
         return None
+
+
+def fallback_gains(config: SupervisorConfig, driver_period: float) -> PdGains:
+    """Computed torque's gains for a driver of this period (s): ``config.kp``/``kv``, their
+    natural frequency lowered to ``fallback_bandwidth / driver_period`` where that is less.
+
+    A command acts a driver period after its state, two with a drive that adds a cycle; with
+    the Panda's light wrist on a 100 Hz driver (20 ms in all, robot_sim's ``effects: panda``,
+    case (c)) the 30 rad/s of Kp 900 / Kv 60 lost the arm (600 deg), 20 rad/s held it within
+    6.5 deg, 15 within 9.5 (a softer hold sags more under a payload the model does not know:
+    the PUMA 15 and 25 deg). The damping ratio is kept.
+    """
+    omega = math.sqrt(config.kp)
+    if omega <= 0.0 or driver_period <= 0.0:
+        return PdGains(kp=config.kp, kv=config.kv)
+    scale = min(1.0, config.fallback_bandwidth / (driver_period * omega))
+    return PdGains(kp=config.kp * scale * scale, kv=config.kv * scale)
 
 
 def fallback_law(
