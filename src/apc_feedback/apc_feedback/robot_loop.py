@@ -447,9 +447,6 @@ class RobotLoop:
             return out
         self.count(f"supervisor.{trigger}")
         self._hand_over(k, f"supervisor trigger {trigger!r}")
-        take_over = getattr(self.fallback, "take_over", None)
-        if backup is not None and take_over is not None:
-            return take_over()  # its integral starts afresh
         return backup
 
     def _hand_over(self, k: int, why: str) -> None:

@@ -73,12 +73,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Robot
-from apc_feedback.baselines import ComputedTorque, PdGains
-from apc_feedback.controller import FeedbackLaw, FeedbackOutput
+from apc_feedback.baselines import PdGains
+from apc_feedback.controller import FeedbackLaw
 from apc_feedback.laws import make_law
 
 #: The triggers, in the order they are checked; each is counted as ``supervisor.<trigger>``.
@@ -395,56 +394,6 @@ def fallback_gains(config: SupervisorConfig, driver_period: float) -> PdGains:
     return PdGains(kp=config.kp * scale * scale, kv=config.kv * scale)
 
 
-class FallbackComputedTorque(FeedbackLaw):
-    """Computed torque (Eq. 36) with integral action, as a fallback: it holds what it does
-    not know.
-
-    The adaptive law it replaces has learnt the payload (its ŵ); computed torque on the
-    controller's model has not, and sags under it (1.7 deg on the PUMA at Kp 900, 2.6 deg on
-    the Panda's wrist, more at the gains a slow driver allows). A torque offset ``b``,
-    zero when it takes over, integrates the position error through the model's inertia,
-    ``b += T Ki M(q) e`` with ``Ki = 0.1 ω³`` (``ω = sqrt(Kp)``: the integral's pole a tenth of
-    the loop's, well inside Routh's ``Ki < 2 ω³``). Taking over from the last command instead
-    (a bumpless transfer) copies a diverging law's torque: measured offline it held a flipped
-    Ĝ within 0.15 deg but let a 200 Hz move reach 14 deg (3.6 deg with the offset from zero).
-    """
-
-    kind = "computed_torque"
-
-    def __init__(self, robot: Robot, gains: PdGains, period: float) -> None:
-        super().__init__(robot.model.nv)
-        self._law = ComputedTorque(robot.model, gains)
-        self._model, self._data = robot.model, robot.model.createData()
-        self.period = period
-        self.bias = np.zeros(self.n_joints)
-        self._last_du = np.zeros(self.n_joints)
-
-    @property
-    def settings(self) -> PdGains:
-        return self._law.gains
-
-    def reconfigure(self, settings: PdGains) -> None:
-        self._law.reconfigure(settings)
-
-    def reset(self) -> None:
-        self.bias[:] = 0.0
-
-    def update(self, k, q, qd, q_d, qd_d, qdd_d, u_n, applied) -> FeedbackOutput:
-        out = self._law.update(k, q, qd, q_d, qd_d, qdd_d, u_n, applied)
-        ki = 0.1 * self._law.gains.kp**1.5
-        inertia = pin.crba(self._model, self._data, q)
-        inertia = np.triu(inertia) + np.triu(inertia, 1).T
-        self.bias += self.period * ki * (inertia @ (q_d - q))
-        self._last_du = out.du + self.bias
-        return FeedbackOutput(self._last_du.copy())
-
-    def take_over(self) -> FeedbackOutput:
-        """Take the joints: the offset starts from zero; this sample's command without it."""
-        self._last_du -= self.bias
-        self.bias[:] = 0.0
-        return FeedbackOutput(self._last_du.copy())
-
-
 def fallback_law(
     config: SupervisorConfig,
     robot: Robot,
@@ -455,5 +404,5 @@ def fallback_law(
     ``config.kp``/``kv``, or the PID with the settings ``pid`` (:class:`PidGains` fields;
     default: tuned)."""
     if config.fallback == "computed_torque":
-        return FallbackComputedTorque(robot, PdGains(kp=config.kp, kv=config.kv), period)
+        return make_law("computed_torque", robot, period, {"kp": config.kp, "kv": config.kv})
     return make_law("pid", robot, period, pid)
