@@ -536,20 +536,29 @@ class AdaptiveFeedback(FeedbackLaw):
             return receding_horizon_control(
                 F, G, w, self.Q, self.R, dx, config.horizon, check_weights=False
             )
-        n, T = self.n_joints, config.period
-        limit = config.integral_limit
-        self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
-        # ξ(k+1) = ξ(k) + T δq(k+1), with δq(k+1) from the identified model's position rows.
-        Fa = np.zeros((3 * n, 3 * n))
-        Fa[: 2 * n, : 2 * n] = F
-        Fa[2 * n :, : 2 * n] = T * F[:n]
-        Fa[2 * n :, 2 * n :] = np.eye(n)
-        Ga = np.vstack([G, T * G[:n]])
-        wa = np.concatenate([w, T * w[:n]])
-        xa = np.concatenate([dx, self.integral])
+        Fa, Ga, wa, xa = self._with_integral(F, G, w, dx, dx)
         return receding_horizon_control(
             Fa, Ga, wa, self._Q_aug, self.R, xa, config.horizon, check_weights=False
         )
+
+    def _with_integral(
+        self, F: np.ndarray, G: np.ndarray, w: np.ndarray, x: np.ndarray, dx: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The model ``(F, G, w)`` over the state ``x`` (δx first) augmented with the
+        integrated position error, after this sample's integration step (anti-windup bound
+        ``integral_limit``): ``ξ(k+1) = ξ(k) + T δq(k+1)``, with ``δq(k+1)`` from the model's
+        position rows."""
+        n, T, limit = self.n_joints, self.config.period, self.config.integral_limit
+        self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
+        s = F.shape[0]
+        Fa = np.zeros((s + n, s + n))
+        Fa[:s, :s] = F
+        Fa[s:, :s] = T * F[:n]
+        Fa[s:, s:] = np.eye(n)
+        Ga = np.vstack([G, T * G[:n]])
+        wa = np.concatenate([w, T * w[:n]])
+        xa = np.concatenate([x, self.integral])
+        return Fa, Ga, wa, xa
 
     def _stuck(self, qd: np.ndarray) -> bool:
         """A joint's measured speed is below ``identify_min_speed`` at ``k-1`` or ``k``."""
@@ -603,7 +612,7 @@ class AdaptiveFeedback(FeedbackLaw):
         lag, so the decision is weighed where it has acted. The integral state of
         :meth:`_control` is added on the position rows.
         """
-        config, n, T = self.config, self.n_joints, self.config.period
+        config, n = self.config, self.n_joints
         lags = config.input_lags
         p, s = 2 * n, 2 * n + lags * n
         G_all = self.rls.G
@@ -620,15 +629,7 @@ class AdaptiveFeedback(FeedbackLaw):
         x = np.concatenate([dx, self._inputs[:lags].ravel()])
         q_diagonal = np.concatenate([self.Q.diagonal(), np.zeros(lags * n)])
         if config.q_integral > 0.0:
-            limit = config.integral_limit
-            self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
-            Fa = np.zeros((s + n, s + n))
-            Fa[:s, :s] = F
-            Fa[s:, :s] = T * F[:n]
-            Fa[s:, s:] = np.eye(n)
-            F, G = Fa, np.vstack([G, T * G[:n]])
-            w = np.concatenate([w, T * w[:n]])
-            x = np.concatenate([x, self.integral])
+            F, G, w, x = self._with_integral(F, G, w, x, dx)
             q_diagonal = np.concatenate([q_diagonal, np.full(n, config.q_integral)])
         return receding_horizon_control(
             F, G, w, np.diag(q_diagonal), self.R, x, config.horizon + lags, check_weights=False
