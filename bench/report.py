@@ -324,7 +324,8 @@ def markdown(d: dict[str, Any]) -> str:
             if not isinstance(r, dict):
                 continue
             lat, age, trip = (
-                r.get(k) or {} for k in ("latency_us", "state_age_at_tick_us", "tick_to_arrival_us")
+                r.get(k) or {}
+                for k in ("latency_us", "state_age_at_sample_us", "sample_to_arrival_us")
             )
             rows.append(
                 [
@@ -338,6 +339,7 @@ def markdown(d: dict[str, Any]) -> str:
                     f"{trip.get('median')} / {trip.get('p99')}",
                     _pct(r.get("late_after_next_cycle")),
                     str(r.get("achieved_hz")),
+                    ", ".join(f"{v:.2f}" for v in r.get("max_deviation_deg_per_run", [])),
                     str((r.get("machine_load") or {}).get("other_cores", "")),
                 ]
             )
@@ -349,10 +351,11 @@ def markdown(d: dict[str, Any]) -> str:
                 "late per run (%)",
                 "median us",
                 "p99 us",
-                "state age at tick us (median / p99)",
-                "tick -> driver us (median / p99)",
+                "state age at sample us (median / p99)",
+                "sample -> driver us (median / p99)",
                 "after the next cycle",
                 "driver Hz",
+                "held within (deg, per run)",
                 "other jobs (cores)",
             ],
             rows,

@@ -3,9 +3,9 @@
 ``robot_sim`` (a simulated ros2_control robot, engine ``pinocchio``, wall time, ``state_rate``
 1000 Hz, the 3-joint PUMA 560 with the 5 lb payload at the wrist centre) runs in its own
 process; the controllers of ``config/puma560_3dof_robot.yaml`` (``feedforward_node`` in robot
-mode and ``robot_node``, with computed torque: see :data:`CONTROLLER`) run at ``period`` =
-1 ms, either composed in one process (what ``arm --controllers`` does) or as two processes.
-The arm holds its start pose (the law runs every sample as it does on a move).
+mode and ``robot_node`` with the adaptive law, recommended preset: :data:`CONTROLLER`) run at
+``period`` = 1 ms, either composed in one process (what ``arm --controllers`` does) or as two
+processes. The arm holds its start pose (the law runs every sample as it does on a move).
 Processes are ``bench/robot_proc.py``, on a random ``ROS_DOMAIN_ID``, localhost only.
 
 Per layout, ``runs`` runs (pooled) of ``seconds`` of steady run after a ``warmup_s`` from the
@@ -16,22 +16,26 @@ first command:
   cycles: the driver's ``held_command_cycles`` counter (:class:`RobotDriver`);
 - ``latency_us``: from the stamp of the joint state a command was computed from (the driver's
   clock when it read the arm and published) to the command's arrival at the driver, per
-  command; split into ``state_age_at_tick_us`` (the state's trip to ``robot_node`` plus the wait
-  for its sample tick: the two timers' phase) and ``tick_to_arrival_us`` (the law, the
-  feedforward's set point already in hand, and the command's trip);
+  command; split into ``state_age_at_sample_us`` (the state's trip to ``robot_node``: samples
+  are taken on arrival) and ``sample_to_arrival_us`` (the law, the wait for the feedforward's
+  set point when it is not in hand yet, and the command's trip);
 - ``robot_node`` is activated once the feedforward is matched and a joint state is in (a start
   sample sent before the feedforward listens is lost, and robot_node then never commands), at
-  a set phase of the driver's cycle (:data:`LAYOUTS`): its sample timer free-runs from there;
+  a set phase of the driver's cycle (:data:`LAYOUTS`);
 - ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
-  their state (the ``ros_loop`` definition of a late sample).
+  their state (the ``ros_loop`` definition of a late sample);
+- ``max_deviation_deg``: the largest deviation of a sampled position from the first, per run
+  (the law holds the arm).
 
-    .venv/bin/python bench/robot_loop.py [--seconds 10] [--runs 3] [--quick] [--no-write]
+    .venv/bin/python bench/robot_loop.py [--seconds 10] [--runs 3] [--quick]
+        [--controller adaptive] [--no-write]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -49,23 +53,18 @@ ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
 CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
 RATE_HZ = 1000
 #: layout -> (controllers in one process?, phase of robot_node's activation after a joint
-#: state's stamp, s). robot_node's sample timer free-runs from its activation, so that phase
-#: stays (the driver's and the node's clocks are this machine's); activation itself and the
-#: timer's wake-up add ~0.2-0.4 ms. At phase 0 the ticks come ~0.3 ms after each state (it has
-#: arrived; the command has ~0.7 ms to reach the driver before its next cycle); at 0.6 ms they
-#: come just before the next state, where a little jitter leaves a tick with no new state or
-#: a command after the driver's cycle. ``arm --controllers`` with ``autostart`` activates
-#: wherever its start falls, anywhere between the two.
+#: state's stamp, s). Samples are taken on the states' arrival, so the phase should not
+#: matter; ``composed_late_phase`` checks that it does not. ``arm --controllers`` with
+#: ``autostart`` activates wherever its start falls.
 LAYOUTS: dict[str, tuple[bool, float]] = {
     "composed": (True, 0.0),
     "separate": (False, 0.0),
     "composed_late_phase": (True, 0.6e-3),
 }
-#: The law at T = 1 ms. The adaptive law with either preset (recommended or paper, tuned at
-#: T = 10 ms) drives every joint to its effort limit within 0.1 s at T = 1 ms; computed torque
-#: (Kp = 100, Kv = 20) holds the arm. The adaptive law costs ~20 us more per sample
-#: (``bench/compute.py``), small beside the latencies measured here.
-CONTROLLER = "computed_torque"
+#: The law at T = 1 ms: the adaptive law with the recommended preset, the robot file's. Its
+#: weights are per sample and its horizon three samples; they carry over from T = 10 ms to
+#: 1 ms (``test_robot_loop``'s periods test, simulated time).
+CONTROLLER = "adaptive"
 
 #: robot_sim's side: the README's "Running on a robot" example at 1 kHz in wall time.
 ROBOT_SIM_PARAMS: dict[str, Any] = {
@@ -91,8 +90,9 @@ def write_robot_sim_params(path: Path) -> None:
 class RobotRun:
     """The processes of one run: robot_sim, then the controllers (composed or apart)."""
 
-    def __init__(self, workdir: Path, tag: str, layout: str) -> None:
+    def __init__(self, workdir: Path, tag: str, layout: str, controller: str = CONTROLLER) -> None:
         self.workdir, self.tag, self.layout = workdir, tag, layout
+        self.controller = controller
         self.sim_params = workdir / f"{tag}.robot_sim.yaml"
         write_robot_sim_params(self.sim_params)
         self.started_file = workdir / f"{tag}.started"
@@ -113,8 +113,8 @@ class RobotRun:
     def start(self) -> None:
         self._spawn("robot_sim", self.sim_params, "--started", str(self.started_file))
         composed, phase = LAYOUTS[self.layout]
-        args = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={CONTROLLER}"]
-        args += ["--tick-phase", str(phase)]
+        args = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={self.controller}"]
+        args += ["--activation-phase", str(phase)]
         if composed:
             self._spawn("controllers", CONTROLLERS_FILE, *args)
         else:
@@ -220,7 +220,10 @@ def run_samples(
         "late_next": np.asarray(late_next, dtype=bool),
         "unmatched": unmatched,
         "duplicates": duplicates,
-        "counters": {k: counters[k] for k in COUNTERS if k in counters},
+        "counters": {
+            k: v for k, v in counters.items() if k in COUNTERS or k.startswith("supervisor.")
+        },
+        "max_deviation_deg": math.degrees(controller.get("max_deviation_rad", math.nan)),
     }
 
 
@@ -245,13 +248,14 @@ def summary(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "achieved_hz": round(float(1.0 / intervals.mean()), 1) if intervals.size else None,
         "cycle_interval_us": benchlib.latency_stats(intervals),
         "latency_us": benchlib.latency_stats(latency),
-        "state_age_at_tick_us": benchlib.latency_stats(np.concatenate([r["age"] for r in runs])),
-        "tick_to_arrival_us": benchlib.latency_stats(np.concatenate([r["trip"] for r in runs])),
+        "state_age_at_sample_us": benchlib.latency_stats(np.concatenate([r["age"] for r in runs])),
+        "sample_to_arrival_us": benchlib.latency_stats(np.concatenate([r["trip"] for r in runs])),
         "late_after_next_cycle": round(float(late_next.mean()), 5) if late_next.size else None,
         "commands_matched": int(latency.size),
         "commands_unmatched": sum(r["unmatched"] for r in runs),
         "duplicate_commands": sum(r["duplicates"] for r in runs),
         "controller_counters": counters,
+        "max_deviation_deg_per_run": [round(r["max_deviation_deg"], 3) for r in runs],
         "runs": len(runs),
     }
 
@@ -264,13 +268,18 @@ def analyse(
 
 
 def measure(
-    workdir: Path, layout: str, seconds: float, warmup_s: float, runs: int = 1
+    workdir: Path,
+    layout: str,
+    seconds: float,
+    warmup_s: float,
+    runs: int = 1,
+    controller: str = CONTROLLER,
 ) -> dict[str, Any]:
     samples = []
     role = "controllers" if LAYOUTS[layout][0] else "robot_node"
     account = benchlib.CpuAccount()
     for i in range(runs):
-        run = RobotRun(workdir, f"robot_{layout}_{i}", layout)
+        run = RobotRun(workdir, f"robot_{layout}_{i}", layout, controller)
         run.run(seconds + warmup_s + 0.2)
         samples.append(run_samples(run.result("robot_sim"), run.result(role), warmup_s, seconds))
     out = summary(samples)
@@ -280,15 +289,19 @@ def measure(
     benchlib.progress(
         f"robot 1 kHz {layout}: late {100 * (out['late_fraction'] or 0):.2f} % "
         f"({out['held_cycles']}/{out['cycles']}; per run {out['late_fraction_per_run']}), "
-        f"latency median {lat.get('median')} us, p99 {lat.get('p99')} us (state age at tick "
+        f"latency median {lat.get('median')} us, p99 {lat.get('p99')} us (state age at sample "
         f"median per run {out['state_age_median_us_per_run']} us), achieved "
-        f"{out['achieved_hz']} Hz; other jobs used {out['machine_load']['other_cores']} cores"
+        f"{out['achieved_hz']} Hz; hold deviation per run {out['max_deviation_deg_per_run']} deg; "
+        f"other jobs used {out['machine_load']['other_cores']} cores"
     )
     return out
 
 
 def run(
-    quick: bool = False, seconds: float | None = None, runs: int | None = None
+    quick: bool = False,
+    seconds: float | None = None,
+    runs: int | None = None,
+    controller: str = CONTROLLER,
 ) -> dict[str, Any]:
     benchlib.isolate_dds()
     seconds = seconds if seconds is not None else (3.0 if quick else 10.0)
@@ -297,18 +310,17 @@ def run(
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="apc_bench_") as tmp:
         for layout in LAYOUTS:
-            out[layout] = measure(Path(tmp), layout, seconds, warmup_s, runs)
+            out[layout] = measure(Path(tmp), layout, seconds, warmup_s, runs, controller)
     out["settings"] = {
         "robot": "robot_sim, engine pinocchio, wall time, state_rate 1000 Hz, 3-joint PUMA 560, "
         "2.268 kg at wrist_center, holding q = [0, -45, -45] deg",
         "controllers": "config/puma560_3dof_robot.yaml with period 0.001 s: feedforward_node "
-        f"(mode robot, lookahead 1) + robot_node (controller {CONTROLLER}; the adaptive law's "
-        "presets, tuned at T = 10 ms, drive the arm to its effort limits at T = 1 ms)",
+        f"(mode robot, lookahead 1) + robot_node (controller {controller}, preset recommended)",
         "layouts": "composed: feedforward + robot_node on one events executor (arm "
         "--controllers); separate: one process each; robot_sim always in its own process; "
         "robot_node activated at "
         + ", ".join(f"{k} {1e3 * v[1]:g} ms" for k, v in LAYOUTS.items())
-        + " after a joint state's stamp (its ticks follow ~0.2-0.4 ms later)",
+        + " after a joint state's stamp (samples are taken on arrival)",
         "late": "driver cycles with no command arrived since the previous cycle / cycles",
         "latency": "joint state stamp (driver clock at read) -> command taken by the driver",
     }
@@ -320,11 +332,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, help="steady seconds per layout (default 10)")
     parser.add_argument("--runs", type=int, help="runs per layout, pooled (default 3)")
     parser.add_argument("--quick", action="store_true", help="one run of 3 s per layout")
+    parser.add_argument(
+        "--controller",
+        default=CONTROLLER,
+        help=f"robot_node's controller (default {CONTROLLER}; e.g. computed_torque)",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     benchlib.emit(
-        run(args.quick, args.seconds, args.runs), "robot_loop", t0, write=not args.no_write
+        run(args.quick, args.seconds, args.runs, args.controller),
+        "robot_loop",
+        t0,
+        write=not args.no_write,
     )
     return 0
 

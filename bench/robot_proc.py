@@ -17,12 +17,13 @@ Measured without touching ``src/``, through public attributes:
   driver's ``held_command_cycles`` counter went up, i.e. no command arrived since the
   previous cycle). ``--started`` is written at the first command.
 - ``controllers`` / ``robot_node``: ``robot_node`` is configured at start and activated once
-  the feedforward is matched and a joint state has arrived, ``--tick-phase`` seconds after a
-  joint state's stamp (its sample timer then ticks at that phase of the driver's cycle). For
-  every command ``robot_node`` publishes: the data, the stamp of the joint state its sample
-  was taken from (``loop.sampler.last``), the time that state was sampled (its arrival: samples
-  are taken on arrival, whatever ``--tick-phase``) and the publish time (all on
-  the node clock, the system clock here, as the driver's).
+  the feedforward is matched and a joint state has arrived, ``--activation-phase`` seconds after a
+  joint state's stamp (where in the driver's cycle activation falls; samples are taken on
+  the states' arrival whatever it is). For every command ``robot_node`` publishes: the data,
+  the stamp of the joint state its sample was taken from (``loop.sampler.last``), the time
+  that state was sampled (its arrival) and the publish time (all on the node clock, the system
+  clock here, as the driver's); and the largest deviation of a sampled position from the
+  first (the arm holds its start pose).
 
 At SIGINT the process writes what it noted to ``--out``; ``robot_loop.py`` matches commands to
 their joint states by their data (bit-exact floats across DDS).
@@ -81,6 +82,8 @@ class CommandProbe:
         self.sent: list[tuple[list[float], int, int, int]] = []
         self._state_ns = -1
         self._tick_ns = -1
+        self._first_position: Any = None
+        self.max_deviation_rad = 0.0  # of a sampled position from the first (the arm holds)
         loop = node.loop
         on_joint_state, publish = loop.on_joint_state, node._publish
 
@@ -88,6 +91,11 @@ class CommandProbe:
             step = on_joint_state(state, now_ns)
             if step.sample is not None:  # sampled on the state's arrival
                 self._state_ns, self._tick_ns = loop.sampler.last.state_ns, now_ns
+                position = step.sample.position
+                if self._first_position is None:
+                    self._first_position = position.copy()
+                deviation = float(abs(position - self._first_position).max())
+                self.max_deviation_rad = max(self.max_deviation_rad, deviation)
             return step
 
         def timed_publish(step: Any) -> None:
@@ -100,7 +108,11 @@ class CommandProbe:
         node._publish = timed_publish
 
     def dump(self) -> dict[str, Any]:
-        return {"sent": self.sent, "counters": dict(self.node.diagnostics.counters)}
+        return {
+            "sent": self.sent,
+            "counters": dict(self.node.diagnostics.counters),
+            "max_deviation_rad": self.max_deviation_rad,
+        }
 
 
 #: Seconds between seeing the feedforward in the graph and activating: the graph can list an
@@ -142,11 +154,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True)
     parser.add_argument("--started")
     parser.add_argument(
-        "--tick-phase",
+        "--activation-phase",
         type=float,
         default=0.0,
         help="activate robot_node this many seconds after the stamp of a joint state (its "
-        "sample timer then ticks at that phase of the driver's cycle)",
+        "samples are taken on the states' arrival whatever it is)",
     )
     args = parser.parse_args(argv)
 
@@ -185,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
             executor.add_node(node)
         while spin_once_or_stop(executor):
             if isinstance(probe, CommandProbe) and not activated:
-                activated = _activate(probe.node, args.tick_phase, heard_at)
+                activated = _activate(probe.node, args.activation_phase, heard_at)
             if not started and args.started and isinstance(probe, DriverProbe):
                 if probe.driver.has_command:
                     Path(args.started).write_text(f"{time.monotonic()}\n")

@@ -29,7 +29,7 @@ def _records() -> tuple[dict, dict]:
         sent.append((data, state_ns, state_ns + 100_000, state_ns + 200_000))
         arrivals.append((data, t + delay))
     driver = {"commands": arrivals, "cycles": cycles, "counts": {}}
-    return driver, {"sent": sent, "counters": {"samples_taken": 10}}
+    return driver, {"sent": sent, "counters": {"samples_taken": 10}, "max_deviation_rad": 0.01}
 
 
 def test_analysis_matches_commands_to_their_states_in_order_and_counts_late_cycles():
@@ -42,8 +42,9 @@ def test_analysis_matches_commands_to_their_states_in_order_and_counts_late_cycl
     assert out["duplicate_commands"] == 1
     assert out["latency_us"]["max"] == pytest.approx(1200.0, abs=0.5)
     assert out["latency_us"]["median"] == pytest.approx(300.0, abs=0.5)
-    assert out["state_age_at_tick_us"]["median"] == pytest.approx(100.0, abs=0.5)
+    assert out["state_age_at_sample_us"]["median"] == pytest.approx(100.0, abs=0.5)
     assert out["late_after_next_cycle"] == pytest.approx(1 / 9, abs=1e-5)  # 9 has no next
+    assert out["max_deviation_deg_per_run"] == [pytest.approx(0.573, abs=1e-3)]
 
 
 def test_analysis_without_commands_is_an_error():
@@ -57,7 +58,12 @@ def test_one_second_run_of_both_layouts_gives_the_figures():
     out = robot_loop.run(seconds=1.0, runs=1)["robot_loop"]
     for layout in robot_loop.LAYOUTS:
         r = out[layout]
-        for key in ("late_fraction", "latency_us", "state_age_at_tick_us", "tick_to_arrival_us"):
+        for key in (
+            "late_fraction",
+            "latency_us",
+            "state_age_at_sample_us",
+            "sample_to_arrival_us",
+        ):
             assert r[key] is not None, (layout, key)
         assert r["cycles"] > 500 and r["commands_matched"] > 0, r
         assert r["latency_us"]["n"] == r["commands_matched"]

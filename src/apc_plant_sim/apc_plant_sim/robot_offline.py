@@ -36,7 +36,6 @@ from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import CONFIG_DIR
 
 MS = 1_000_000  # ns
-T_NS = 10 * MS  # the preset's period
 Q0_DEG = (0.0, -45.0, -45.0)
 
 
@@ -99,6 +98,7 @@ def run_robot_loop(
     *,
     goal_deg: Sequence[float] | None = None,
     driver_ms: float = 2.0,
+    period_ms: float = 10.0,
     phase_ms: float = 0.3,
     transport_ms: float = 0.3,
     payload_kg: float = 2.268,
@@ -115,9 +115,11 @@ def run_robot_loop(
     duration_s : float
         Run time after activation (s).
     goal_deg : sequence of float, optional
-        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 20 samples after activation.
+        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 0.2 s after activation.
     driver_ms, phase_ms : float
         The driver's period and its cycles' phase after a multiple of T (ms).
+    period_ms : float
+        The controllers' sampling period T (ms); the preset's is 10.
     transport_ms : float
         From a state's stamp to its arrival at the loop (ms): its trip and the controllers'
         wake-up; the command computed from it leaves then.
@@ -135,6 +137,8 @@ def run_robot_loop(
         ``setup(loop)`` once the loop is built, before activation: to observe the law or to
         make it go wrong (wrap ``loop.law.update``).
     """
+    T_NS = round(period_ms * MS)
+    T = T_NS * 1e-9
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
     plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
@@ -144,17 +148,17 @@ def run_robot_loop(
     data = controller.model.createData()
     counts: Counter = Counter()
     lines: list[tuple[str, str]] = []
-    config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=0.01))
+    config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
     tolerance = np.full(3, 0.2)
     supervision = {}
     if supervisor is not None and supervisor.enable:
         supervision = {
-            "supervisor": Supervisor(supervisor, 3, 0.01),
-            "fallback": fallback_law(supervisor, controller, 0.01),
+            "supervisor": Supervisor(supervisor, 3, T),
+            "fallback": fallback_law(supervisor, controller, T),
         }
     loop = RobotLoop(
         law=AdaptiveFeedback(controller.model, config),
-        sampling=RobotSamplingConfig(),
+        sampling=RobotSamplingConfig(period=T),
         command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,
@@ -174,11 +178,11 @@ def run_robot_loop(
 
     def feedforward(sample: JointSample, start: bool) -> list[Step]:
         if start:
-            hold = Quintic(sample.position, sample.position, 0.01)
-            ff[:] = [Feedforward(controller.model, hold, 0.01, sample.stamp_ns // T_NS), None]
+            hold = Quintic(sample.position, sample.position, T)
+            ff[:] = [Feedforward(controller.model, hold, T, sample.stamp_ns // T_NS), None]
             if goal_deg is not None:
                 move = FourThreeFour(sample.position, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
-                ff[0].set_trajectory(move, sample.stamp_ns // T_NS + 20)
+                ff[0].set_trajectory(move, sample.stamp_ns // T_NS + round(0.2 / T))
         k = sample.stamp_ns // T_NS
         first = k if start else max(ff[1], k)
         steps = []
