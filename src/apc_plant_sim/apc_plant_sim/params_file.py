@@ -96,6 +96,7 @@ def render(
         f"# apc parameters for {source or urdf}, written by apc_params; edit freely.",
         f"# Joints, in the order of every per-joint list: {joints}.",
         "# Active lines come from the URDF; commented ones are each node's default.",
+        "# A key in a node's section is overridden by naming the node: -p <node>:<key>:=<value>.",
     ]
     body = [*_section("/**", _unique(shared_rows), shared, ()), ""]
     if robot_mode:
