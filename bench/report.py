@@ -102,9 +102,8 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
             )
         )
     for layout, label, target in (
-        ("composed", "controllers composed (`arm --controllers`)", True),
-        ("separate", "controllers in two processes", False),
-        ("composed_late_phase", "controllers composed, ticks just before the states", False),
+        ("robot_node", "`robot_node`", True),
+        ("late_phase", "`robot_node` activated 0.6 ms after a state", False),
     ):
         r = _get(d, "robot_loop", layout)
         if r:
@@ -319,7 +318,7 @@ def markdown(d: dict[str, Any]) -> str:
             "",
         ]
         rows = []
-        for layout in ("composed", "separate", "composed_late_phase"):
+        for layout in ("robot_node", "late_phase"):
             r = rl.get(layout)
             if not isinstance(r, dict):
                 continue

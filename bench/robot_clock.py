@@ -1,11 +1,11 @@
-"""The robot path on wall time, as users run it: ``robot_sim`` and the controllers apart.
+"""The robot path on wall time, as users run it: ``robot_sim`` and ``robot_node`` apart.
 
 Every robot figure of ``robot_compare`` is in simulated time. Here the simulated ros2_control
 robot (``robot_sim``, engine ``mujoco``, ``sim_time: false``: its wall timer at ``state_rate``)
 runs in one process and apc's controllers in another, started the way a user starts them::
 
     robot_sim --ros-args --params-file <robot_sim.yaml>
-    arm --controllers --ros-args --params-file config/<arm>_robot.yaml -p robot_node:...
+    robot_node --ros-args --params-file config/<arm>_robot.yaml -p robot_node:...
 
 on a random ``ROS_DOMAIN_ID``, localhost only (:func:`benchlib.isolate_dds`); node logs go to
 files in a temporary directory, progress is one line per run.
@@ -23,7 +23,7 @@ and the loss rule below is the benchmark's, not the node's abort.
 Each run (``--runs`` per cell, default 3): ``robot_node`` is configured, then activated through
 its lifecycle service at a random phase of the driver's cycle (drawn from ``--seed``) after a
 joint state's stamp; the arm holds :data:`HOLD_BEFORE_S`; robot_compare's case-(c) move
-(``goal_message``) goes to the feedforward on ``feedforward/trajectory``; the run ends
+(``goal_message``) goes to robot_node on ``feedforward/trajectory``; the run ends
 :data:`HOLD_AFTER_S` after the move. The benchmark process subscribes to the samples the
 controllers took (``feedback/sample``, stamped kT) and their set points (``feedforward/setpoint``,
 stamped kT) and pairs them by stamp: max error per joint over the move and the error at its
@@ -92,8 +92,9 @@ LOST_DEG = 10.0
 HOLD_BEFORE_S = 1.0
 #: Wall seconds after the move's planned end before the run ends.
 HOLD_AFTER_S = 0.5
-#: Wall seconds between the feedforward appearing in the graph and activation: the graph can
-#: list an endpoint before DDS has matched it (a start sample lost then is never re-sent).
+#: Wall seconds between robot_node's topics appearing in the graph and activation: the graph
+#: can list an endpoint before DDS has matched it (the first samples would be lost to the
+#: observer).
 MATCH_SETTLE_S = 0.5
 #: ``path_tolerance`` for every law (rad; 0 = no check): the loss rule is :data:`LOST_DEG`.
 PATH_TOLERANCE = [0.0]
@@ -238,7 +239,7 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
     m = result.get("machine") or {}
     load = result.get("machine_load") or {}
     lines = [
-        f"{heading} Robot path on wall time (robot_sim and `arm --controllers` in two processes)",
+        f"{heading} Robot path on wall time (robot_sim and `robot_node` in two processes)",
         "",
         f"Wall time, not simulated time: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; "
         f"load average before/after {result.get('load_average_before', '?')} / "
@@ -419,7 +420,7 @@ class Observer:
         """The newest status of the node named ``node`` (any namespace), if any arrived."""
         return next((v for k, v in self.status.items() if k.endswith("/" + node)), None)
 
-    def feedforward_heard(self) -> bool:
+    def controllers_heard(self) -> bool:
         wire, n = self.wire, self.node
         return (
             self.newest_state_ns is not None
@@ -477,7 +478,7 @@ class WallRun:
         from apc_plant_sim import robot_compare as rc
 
         robot_file = benchlib.CONFIG / rc.ROBOT_FILES[s.arm]
-        cmd = [str(BIN / "arm"), "--controllers", "--ros-args", "--params-file", str(robot_file)]
+        cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(robot_file)]
         self._spawn("controllers", cmd + controller_arguments(s.arm, s.law))
 
     def log_tail(self) -> str:
@@ -530,7 +531,7 @@ class WallRun:
             )
             self._transition(executor, obs, Transition.TRANSITION_CONFIGURE, "configure")
             self._spin_until(
-                executor, obs.feedforward_heard, START_TIMEOUT_S, "waiting for the feedforward"
+                executor, obs.controllers_heard, START_TIMEOUT_S, "waiting for robot_node's topics"
             )
             settle = time.monotonic() + MATCH_SETTLE_S
             self._spin_until(executor, lambda: time.monotonic() > settle, 5.0, "settling")
@@ -657,7 +658,7 @@ def run(
         "seed": seed,
         "settings": {
             "robot_sim": "engine mujoco, sim_time false, robot_compare's case (c) arm and payload",
-            "controllers": "arm --controllers --ros-args --params-file config/<arm>_robot.yaml "
+            "controllers": "robot_node --ros-args --params-file config/<arm>_robot.yaml "
             "-p robot_node:autostart:=false -p robot_node:controller:=<law> "
             f"-p robot_node:path_tolerance:={PATH_TOLERANCE} (adaptive: the file's adaptive.* "
             "overrides put back to the preset's values)",

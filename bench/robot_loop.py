@@ -2,10 +2,9 @@
 
 ``robot_sim`` (a simulated ros2_control robot, engine ``pinocchio``, wall time, ``state_rate``
 1000 Hz, the 3-joint PUMA 560 with the 5 lb payload at the wrist centre) runs in its own
-process; the controllers of ``config/puma560_3dof_robot.yaml`` (``feedforward_node`` in robot
-mode and ``robot_node`` with the adaptive law, recommended preset: :data:`CONTROLLER`) run at
-``period`` = 1 ms, either composed in one process (what ``arm --controllers`` does) or as two
-processes. The arm holds its start pose (the law runs every sample as it does on a move).
+process; ``robot_node`` with ``config/puma560_3dof_robot.yaml`` (the adaptive law, recommended
+preset: :data:`CONTROLLER`, the feedforward's plan sampled inside it) runs at ``period`` = 1 ms
+in another. The arm holds its start pose (the law runs every sample as it does on a move).
 Processes are ``bench/robot_proc.py``, on a random ``ROS_DOMAIN_ID``, localhost only.
 
 Per layout, ``runs`` runs (pooled) of ``seconds`` of steady run after a ``warmup_s`` from the
@@ -17,11 +16,10 @@ first command:
 - ``latency_us``: from the stamp of the joint state a command was computed from (the driver's
   clock when it read the arm and published) to the command's arrival at the driver, per
   command; split into ``state_age_at_sample_us`` (the state's trip to ``robot_node``: samples
-  are taken on arrival) and ``sample_to_arrival_us`` (the law, the wait for the feedforward's
-  set point when it is not in hand yet, and the command's trip);
-- ``robot_node`` is activated once the feedforward is matched and a joint state is in (a start
-  sample sent before the feedforward listens is lost, and robot_node then never commands), at
-  a set phase of the driver's cycle (:data:`LAYOUTS`);
+  are taken on arrival) and ``sample_to_arrival_us`` (the plan's set point, the law and the
+  command's trip);
+- ``robot_node`` is activated once a joint state is in, at a set phase of the driver's cycle
+  (:data:`LAYOUTS`);
 - ``late_after_next_cycle``: commands that arrived after the driver's next cycle following
   their state (the ``ros_loop`` definition of a late sample);
 - ``max_deviation_deg``: the largest deviation of a sampled position from the first, per run
@@ -52,15 +50,10 @@ import numpy as np
 ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
 CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
 RATE_HZ = 1000
-#: layout -> (controllers in one process?, phase of robot_node's activation after a joint
-#: state's stamp, s). Samples are taken on the states' arrival, so the phase should not
-#: matter; ``composed_late_phase`` checks that it does not. ``arm --controllers`` with
-#: ``autostart`` activates wherever its start falls.
-LAYOUTS: dict[str, tuple[bool, float]] = {
-    "composed": (True, 0.0),
-    "separate": (False, 0.0),
-    "composed_late_phase": (True, 0.6e-3),
-}
+#: layout -> phase of robot_node's activation after a joint state's stamp (s). Samples are
+#: taken on the states' arrival, so the phase should not matter; ``late_phase`` checks that it
+#: does not. ``robot_node`` with ``autostart`` activates wherever its start falls.
+LAYOUTS: dict[str, float] = {"robot_node": 0.0, "late_phase": 0.6e-3}
 #: The law at T = 1 ms: the adaptive law with the recommended preset, the robot file's. Its
 #: weights are per sample and its horizon three samples; they carry over from T = 10 ms to
 #: 1 ms (``test_robot_loop``'s periods test, simulated time).
@@ -88,7 +81,7 @@ def write_robot_sim_params(path: Path) -> None:
 
 
 class RobotRun:
-    """The processes of one run: robot_sim, then the controllers (composed or apart)."""
+    """The processes of one run: robot_sim, then robot_node."""
 
     def __init__(self, workdir: Path, tag: str, layout: str, controller: str = CONTROLLER) -> None:
         self.workdir, self.tag, self.layout = workdir, tag, layout
@@ -112,14 +105,9 @@ class RobotRun:
 
     def start(self) -> None:
         self._spawn("robot_sim", self.sim_params, "--started", str(self.started_file))
-        composed, phase = LAYOUTS[self.layout]
         args = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={self.controller}"]
-        args += ["--activation-phase", str(phase)]
-        if composed:
-            self._spawn("controllers", CONTROLLERS_FILE, *args)
-        else:
-            self._spawn("feedforward", CONTROLLERS_FILE, *args)
-            self._spawn("robot_node", CONTROLLERS_FILE, *args)
+        args += ["--activation-phase", str(LAYOUTS[self.layout])]
+        self._spawn("robot_node", CONTROLLERS_FILE, *args)
 
     def started_at(self) -> float | None:
         try:
@@ -276,12 +264,13 @@ def measure(
     controller: str = CONTROLLER,
 ) -> dict[str, Any]:
     samples = []
-    role = "controllers" if LAYOUTS[layout][0] else "robot_node"
     account = benchlib.CpuAccount()
     for i in range(runs):
         run = RobotRun(workdir, f"robot_{layout}_{i}", layout, controller)
         run.run(seconds + warmup_s + 0.2)
-        samples.append(run_samples(run.result("robot_sim"), run.result(role), warmup_s, seconds))
+        samples.append(
+            run_samples(run.result("robot_sim"), run.result("robot_node"), warmup_s, seconds)
+        )
     out = summary(samples)
     out["seconds_per_run"], out["warmup_s"] = seconds, warmup_s
     out["machine_load"] = account.result()  # other_cores: other jobs on the machine meanwhile
@@ -314,12 +303,10 @@ def run(
     out["settings"] = {
         "robot": "robot_sim, engine pinocchio, wall time, state_rate 1000 Hz, 3-joint PUMA 560, "
         "2.268 kg at wrist_center, holding q = [0, -45, -45] deg",
-        "controllers": "config/puma560_3dof_robot.yaml with period 0.001 s: feedforward_node "
-        f"(mode robot, lookahead 1) + robot_node (controller {controller}, preset recommended)",
-        "layouts": "composed: feedforward + robot_node on one events executor (arm "
-        "--controllers); separate: one process each; robot_sim always in its own process; "
-        "robot_node activated at "
-        + ", ".join(f"{k} {1e3 * v[1]:g} ms" for k, v in LAYOUTS.items())
+        "controllers": "robot_node with config/puma560_3dof_robot.yaml, period 0.001 s, "
+        f"controller {controller}, preset recommended; robot_sim in its own process",
+        "layouts": "robot_node activated at "
+        + ", ".join(f"{k} {1e3 * v:g} ms" for k, v in LAYOUTS.items())
         + " after a joint state's stamp (samples are taken on arrival)",
         "late": "driver cycles with no command arrived since the previous cycle / cycles",
         "latency": "joint state stamp (driver clock at read) -> command taken by the driver",

@@ -2,12 +2,11 @@
 
 Started by ``bench/robot_loop.py``; not meant to be run by hand.
 
-    robot_proc.py --role {robot_sim,controllers,feedforward,robot_node} --params FILE.yaml
+    robot_proc.py --role {robot_sim,robot_node} --params FILE.yaml
                   [-p NAME:=VALUE ...] --out RESULT.json [--started FILE]
 
-``controllers`` puts ``feedforward_node`` and ``robot_node`` on one executor (what
-``arm --controllers`` does); the other roles run one node. Parameters come from the ROS
-parameters file and ``-p`` overrides, as on the command line. The spin loop is ``run_node``'s
+Each role runs one node. Parameters come from the ROS parameters file and ``-p`` overrides, as
+on the command line. The spin loop is ``run_node``'s
 (``spin_once`` on ``nodeutil.make_executor``, the events executor).
 
 Measured without touching ``src/``, through public attributes:
@@ -16,11 +15,11 @@ Measured without touching ``src/``, through public attributes:
   clock at arrival) and every driver cycle (``driver.advance``: its time, and whether the
   driver's ``held_command_cycles`` counter went up, i.e. no command arrived since the
   previous cycle). ``--started`` is written at the first command.
-- ``controllers`` / ``robot_node``: ``robot_node`` is configured at start and activated once
-  the feedforward is matched and a joint state has arrived, ``--activation-phase`` seconds after a
-  joint state's stamp (where in the driver's cycle activation falls; samples are taken on
-  the states' arrival whatever it is). For every command ``robot_node`` publishes: the data,
-  the stamp of the joint state its sample was taken from (``loop.sampler.last``), the time
+- ``robot_node``: configured at start and activated once a joint state has arrived,
+  ``--activation-phase`` seconds after a joint state's stamp (where in the driver's cycle
+  activation falls; samples are taken on the states' arrival whatever it is). For every
+  command ``robot_node`` publishes: the data, the stamp of the joint state its sample was
+  taken from (``loop.sampler.last``), the time
   that state was sampled (its arrival) and the publish time (all on the node clock, the system
   clock here, as the driver's); and the largest deviation of a sampled position from the
   first (the arm holds its start pose).
@@ -115,24 +114,11 @@ class CommandProbe:
         }
 
 
-#: Seconds between seeing the feedforward in the graph and activating: the graph can list an
-#: endpoint before DDS has matched it, and a start sample or its set point lost then leaves
-#: robot_node waiting for that set point for ever (it sends the start once).
-MATCH_SETTLE_S = 0.5
-
-
-def _activate(node: Any, phase_s: float, heard_at: list[float]) -> bool:
-    """Activate ``node`` :data:`MATCH_SETTLE_S` after the feedforward is in the graph both
-    ways, with a joint state in, at ``phase_s`` after a joint state's stamp. True once done."""
-    from apc_core import wire
-
+def _activate(node: Any, phase_s: float) -> bool:
+    """Activate ``node`` once a joint state is in, at ``phase_s`` after a joint state's stamp.
+    True once done."""
     newest = node.loop.sampler.newest
-    heard = node.sample_pub.get_subscription_count() > 0 and node.count_publishers(wire.SETPOINT)
-    if newest is None or not heard:
-        return False
-    if not heard_at:
-        heard_at.append(time.monotonic())
-    if time.monotonic() - heard_at[0] < MATCH_SETTLE_S:
+    if newest is None:
         return False
     period_ns = node.loop.period_ns
     target = newest.stamp_ns + round(phase_s * 1e9)
@@ -146,9 +132,7 @@ def _activate(node: Any, phase_s: float, heard_at: list[float]) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--role", required=True, choices=("robot_sim", "controllers", "feedforward", "robot_node")
-    )
+    parser.add_argument("--role", required=True, choices=("robot_sim", "robot_node"))
     parser.add_argument("--params", required=True, help="ROS parameters file (YAML)")
     parser.add_argument("-p", action="append", default=[], help="NAME:=VALUE override")
     parser.add_argument("--out", required=True)
@@ -164,7 +148,6 @@ def main(argv: list[str] | None = None) -> int:
 
     from apc_core.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
     from apc_feedback.robot_node import RobotNode
-    from apc_feedforward.node import FeedforwardNode
     from apc_plant_sim.robot_sim import RobotSimNode
 
     cli = ["--ros-args", "--params-file", args.params]
@@ -177,17 +160,13 @@ def main(argv: list[str] | None = None) -> int:
     executor = None
     started = False
     activated = False
-    heard_at: list[float] = []
     try:
         if args.role == "robot_sim":
             sim = RobotSimNode(cli_args=cli)
             probe = DriverProbe(sim)
             nodes.append(sim)
-        if args.role in ("feedforward", "controllers"):
-            nodes.append(FeedforwardNode(cli_args=cli))
-        if args.role in ("robot_node", "controllers"):
-            # Configured here, activated below once the feedforward listens (as the README's
-            # order for separate processes): a start sample sent before is lost.
+        if args.role == "robot_node":
+            # Configured here, activated below at the phase asked for.
             robot = RobotNode(cli_args=[*cli, "-p", "robot_node:autostart:=false"])
             robot.trigger_configure()
             probe = CommandProbe(robot)
@@ -197,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             executor.add_node(node)
         while spin_once_or_stop(executor):
             if isinstance(probe, CommandProbe) and not activated:
-                activated = _activate(probe.node, args.activation_phase, heard_at)
+                activated = _activate(probe.node, args.activation_phase)
             if not started and args.started and isinstance(probe, DriverProbe):
                 if probe.driver.has_command:
                     Path(args.started).write_text(f"{time.monotonic()}\n")

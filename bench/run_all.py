@@ -7,8 +7,8 @@ Parts, in this order (each also runs alone and then merges its figures into resu
 3. ``bench/ros_loop.py``  lockstep samples/s (one / three processes, recorder on / off) and
                           real time at 100, 500, 1000 Hz in three processes
 4. ``bench/multi_arm.py`` N = 1, 2, 5, 10 namespaced arms at 100 Hz in one ROS domain
-5. ``bench/robot_loop.py`` the robot path at 1 kHz: ``robot_sim`` + the controllers composed
-                          in one process and as two processes (late fraction, latency)
+5. ``bench/robot_loop.py`` the robot path at 1 kHz: ``robot_sim`` + ``robot_node`` in two
+                          processes (late fraction, latency, how far the held arm strays)
 6. ``bench/robot_clock.py`` the robot path on wall time as users run it: tracking error per
                           driver rate, arm, effects and law, runs lost, the supervisor's
                           hand-overs (``--quick``: the PUMA, physical, 500 Hz, one run per law)

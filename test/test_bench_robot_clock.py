@@ -122,7 +122,7 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
             "robot_node_counters": {"missed_samples": 1, "stale": 1, "samples_taken": 300},
         },
         _result([0.7, 0.1, 2.0], None, True),  # move not finished: no final error
-        {"failed": "timed out after 60 s waiting for the feedforward", "lost": None},
+        {"failed": "timed out after 60 s waiting for robot_node's topics", "lost": None},
     ]
     cell = robot_clock.aggregate_cell(runs)
     assert cell["runs"] == 4 and cell["failed"] == 1 and cell["lost"] == 2

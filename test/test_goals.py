@@ -235,14 +235,3 @@ def test_a_restart_drops_plan_and_goals_and_holds_the_position_measured_then(rob
     fresh = queue(robot, first_goal=target)
     fresh.restart()
     assert fresh.first_goal is not None
-
-
-def test_a_restarted_lookahead_answers_the_start_sample_from_its_own_index():
-    la = Lookahead(1)
-    assert la.due(10, 1).samples == range(1, 3)
-    la.sent(Setpoint(1, 0.0, Q0, Q0, Q0, Q0))
-    la.sent(Setpoint(2, 0.0, Q0, Q0, Q0, Q0))
-    la.restart()
-    # the same stamp again is a start, not a resend; set point 1 goes out again
-    due = la.due(10, 1)
-    assert due.resend is None and due.samples == range(1, 3)

@@ -155,13 +155,12 @@ def test_the_robot_mode_file_starts_the_controllers_of_a_ros2_control_robot(arm,
     argv = ["--urdf", urdf, "--out", str(out), "--robot-mode"]
     assert main(argv + (["--lock-joints", *lock] if lock else [])) == 0
     values = yaml.safe_load(out.read_text())
-    assert set(values) == {"/**", "feedforward_node", "robot_node"}
+    assert set(values) == {"/**", "robot_node"}
     assert "inertia_error" not in values["/**"]["ros__parameters"]  # none added to a real arm
     robot, _ = load(urdf, lock_joints=lock)
     assert values["robot_node"]["ros__parameters"]["command_joints"] == list(robot.joint_names)
 
-    with _started(out, FeedforwardNode, RobotNode) as (feedforward, robot_node):
-        assert feedforward.mode == "robot"
+    with _started(out, RobotNode) as (robot_node,):
         # autostart: configured and activated at construction
         assert robot_node.configure_error == "" and robot_node.loop is not None
         assert robot_node.get_parameter("preset").value == "recommended"

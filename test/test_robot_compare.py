@@ -44,17 +44,16 @@ def test_the_goal_is_the_papers_4_3_4_move():
 
 def test_parameters_are_declared_by_the_nodes_they_go_to():
     from apc_feedback.robot_node import PARAMS as ROBOT_NODE_PARAMS
-    from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS
     from apc_plant_sim.robot_sim import PARAMS as ROBOT_SIM_PARAMS
 
     declared = {
-        "feedforward_node": {p.name for p in FEEDFORWARD_PARAMS},
         "robot_node": {p.name for p in ROBOT_NODE_PARAMS},
         "robot_sim": {p.name for p in ROBOT_SIM_PARAMS},
     }
     for case in (rc.RobotCase("puma3", "pickup", "physical", "adaptive recommended"),
                  rc.RobotCase("panda", "a", "ideal", "PID")):  # fmt: skip
         params = rc.node_parameters(case)
+        assert set(params) == set(declared)
         for node, names in declared.items():
             # rclpy drops an override of an undeclared parameter without a word.
             assert set(params[node]) <= names, (node, set(params[node]) - names)

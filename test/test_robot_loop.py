@@ -1,5 +1,6 @@
-"""Robot mode's loop with synthetic time: pairing, starts, command, clipping, faults; and the
-whole loop closed offline around apc's plant as a 500 Hz driver with no velocity."""
+"""Robot mode's loop with synthetic time: sampling, the plan, starts, command, clipping,
+faults; and the whole loop closed offline around apc's plant as a 500 Hz driver with no
+velocity."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from scripted_plan import HOLD_U_N, ScriptedPlan
 
-from apc_core.wire import JointSample, SetpointStamped
+from apc_core.wire import JointSample, TrajectoryGoal
 from apc_feedback.baselines import PD, PdGains
-from apc_feedback.robot_loop import NOTHING, START_RESEND_SAMPLES, CommandMap, RobotLoop
+from apc_feedback.robot_loop import NOTHING, CommandMap, RobotLoop
 from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedforward.nominal import Setpoint
 from apc_plant_sim.robot_offline import Latency, run_robot_loop
 from apc_plant_sim.scenario import recommended_settings
 
@@ -22,22 +25,27 @@ NAMES = ("a", "b")
 
 def _setpoint(k, q, qd=0.0, u_n=0.0):
     v = np.full(2, 1.0)
-    return SetpointStamped(k * T, q * v, qd * v, 0.0 * v, u_n * v, 0)
+    return Setpoint(k, 0.0, q * v, qd * v, 0.0 * v, u_n * v)
 
 
 def _state(stamp, q, qd=0.0):
     return JointSample(stamp, np.full(2, float(q)), np.full(2, float(qd)), None)
 
 
+def _goal():
+    return TrajectoryGoal(np.array([1.0]), np.zeros((1, 2)), None, None)
+
+
 def _loop(tolerance=0.0, limit=(100.0, 100.0), command_joints=("b", "a"), before=99 * T):
-    """A loop with a PD law; ``before``: the stamp of a state the driver published before
-    activation (its period is then known at the first start), or None for none."""
+    """A loop with a PD law and a scripted plan; ``before``: the stamp of a state the driver
+    published before activation (its period is then known at the first start), or None."""
     counts: Counter = Counter()
     logs: list = []
     loop = RobotLoop(
         law=PD(2, PdGains(kp=100.0, kv=0.0)),
         sampling=RobotSamplingConfig(period=0.01, max_age=0.02, watchdog=0.05),
         command=CommandMap(NAMES, command_joints, np.array(limit)),
+        plan=ScriptedPlan(),
         gravity=lambda q: np.array([1.0, 2.0]),
         path_tolerance=np.full(2, tolerance),
         count=lambda name: counts.update([name]),
@@ -61,22 +69,19 @@ def test_command_map_orders_and_clips_per_joint():
         CommandMap(("a", "b"), ("a", "x"), np.ones(2))
 
 
-def test_activation_is_a_start_and_the_law_runs_when_its_setpoint_arrives():
+def test_activation_holds_the_measured_position_and_commands_from_the_first_sample():
     loop, counts, _ = _loop()
     t = 100 * T + 2 * MS
     assert loop.on_joint_state(_state(t - MS, 0.3), t) == NOTHING  # inactive: no sample
-    loop.activate(t)
+    loop.activate()
     step = loop.on_joint_state(_state(t + MS, 0.3), t + MS + 200_000)  # locks the phase, 3 ms
-    assert step.start and step.sample.stamp_ns == 100 * T and step.command is None
-    # a set point from the plan before the start is dropped, the flagged one is used
-    assert loop.on_setpoint(_setpoint(100, 9.0), start=False).command is None
-    assert counts["superseded_setpoints"] == 1
-    step = loop.on_setpoint(_setpoint(100, 0.3, u_n=1.5), start=True)
-    assert step.command.tolist() == [1.5, 1.5] and step.sample is None
-    # set point 101 is in hand before state 101: the command goes out in that state's callback
-    assert loop.on_setpoint(_setpoint(101, 0.4, u_n=1.0), start=False) == NOTHING
+    assert step.sample.stamp_ns == 100 * T and counts["starts"] == 1
+    assert step.setpoint.q.tolist() == [0.3, 0.3]  # the hold, where the arm is
+    assert step.command.tolist() == [HOLD_U_N, HOLD_U_N]  # u_n, no error
+    # the plan's set point 101 is sampled in state 101's callback, the command goes out then
+    loop.plan.setpoints[101] = _setpoint(101, 0.4, u_n=1.0)
     step = loop.on_joint_state(_state(101 * T + 3 * MS, 0.3), 101 * T + 3 * MS + 200_000)
-    assert not step.start and step.sample.stamp_ns == 101 * T
+    assert step.sample.stamp_ns == 101 * T
     assert step.command == pytest.approx([1.0 + 10.0, 1.0 + 10.0])  # kp * 0.1
 
 
@@ -85,7 +90,7 @@ def test_the_command_of_sample_k_leaves_in_the_callback_of_its_state():
     once, the nine between them nothing; the command's state is the sample's."""
     phase = 4 * MS
     loop, counts, _ = _loop(before=100 * T + phase - MS)
-    loop.activate(100 * T)
+    loop.activate()
     law_positions = []
     update = loop.law.update
     loop.law.update = lambda k, q, *a: law_positions.append((k, q[0])) or update(k, q, *a)
@@ -93,42 +98,50 @@ def test_the_command_of_sample_k_leaves_in_the_callback_of_its_state():
     for i in range(50):
         t = 100 * T + phase + i * MS
         step = loop.on_joint_state(_state(t, 0.001 * i), t + 100_000)
-        if step.start:
-            loop.on_setpoint(_setpoint(100, 0.0), start=True)
-            for k in range(101, 106):
-                loop.on_setpoint(_setpoint(k, 0.0), start=False)
-        elif step.command is not None:
+        if step.command is not None:
             assert step.sample.stamp_ns + phase == t  # the sample is this state, as it is
             commands.append(t)
             assert loop.command_state_ns == t
             loop.command_published(t + 150_000)
         else:
             assert step == NOTHING
-    assert commands == [100 * T + phase + k * T for k in range(1, 5)]
-    assert law_positions[1:] == [(100 + k, 0.001 * 10 * k) for k in range(1, 5)]
+    assert commands == [100 * T + phase + k * T for k in range(5)]
+    assert law_positions == [(100 + k, 0.001 * 10 * k) for k in range(5)]
     figures = loop.timing.figures()
-    assert figures["state_to_command_max_us"] == 150.0  # the start's command was not reported
+    assert figures["state_to_command_max_us"] == 150.0
     assert figures["state_age_median_us"] == 100.0 and figures["carry_max_us"] == 0.0
     assert figures["sample_phase_max_us"] == 4000.0 and figures["driver_period_max_us"] == 1000.0
     assert counts["samples_taken"] == 5 and counts["commands"] == 5
 
 
-def test_a_start_without_an_answer_is_sent_again_from_the_sample_then():
-    # The first start can be lost (published before the feedforward matched): without a
-    # resend the loop would wait for its set point for ever and never command.
-    loop, counts, _ = _loop()
+def test_goals_go_to_the_plan_and_a_start_after_an_abort_drops_the_queued_ones():
+    loop, counts, logs = _loop(tolerance=0.1)
     t = 100 * T
-    loop.activate(t)
-    assert loop.on_joint_state(_state(t, 0.3), t).start
-    for i in range(1, START_RESEND_SAMPLES):
-        step = loop.on_joint_state(_state(t + i * T, 0.3), t + i * T)
-        assert not step.start and step.command is None
-    k = 100 + START_RESEND_SAMPLES
-    step = loop.on_joint_state(_state(k * T, 0.4), k * T)
-    assert step.start and step.sample.stamp_ns == k * T and counts["start_resends"] == 1
-    # an answer to the first start arriving now is from a superseded start
-    assert loop.on_setpoint(_setpoint(100, 0.3), start=True).command is None
-    assert loop.on_setpoint(_setpoint(k, 0.4, u_n=2.0), start=True).command.tolist() == [2.0, 2.0]
+    loop.activate()
+    loop.on_joint_state(_state(t, 0.0), t)
+    loop.add_goal(_goal())
+    loop.add_goal(_goal())
+    assert counts["goals_accepted"] == 2 and len(loop.plan.queued) == 2
+    with pytest.raises(ValueError, match="must take time"):
+        loop.add_goal(TrajectoryGoal(np.array([0.0]), np.zeros((1, 2)), None, None))
+    assert counts["goals_accepted"] == 2
+    loop.plan.setpoints[101] = _setpoint(101, 0.5, qd=1.0)  # far off while moving: abort
+    assert loop.on_joint_state(_state(t + T, 0.0), t + T).command is None
+    assert counts["path_tolerance_aborts"] == 1
+    step = loop.on_joint_state(_state(t + 2 * T, 0.02), t + 2 * T)
+    assert counts["starts"] == 2 and counts["goals_dropped"] == 1 and not loop.plan.queued
+    assert step.setpoint.q.tolist() == [0.02, 0.02] and step.command is not None
+    assert any("2 queued goal(s) dropped" in text for _, text in logs)
+
+
+def test_activation_drops_an_earlier_plan_but_not_goals_that_come_after_it():
+    loop, counts, _ = _loop(before=None)
+    loop.activate()
+    assert loop.plan.restarts == 1
+    loop.add_goal(_goal())  # before the first state: waits for the first sample
+    loop.on_joint_state(_state(100 * T, 0.0), 100 * T)
+    loop.on_joint_state(_state(101 * T, 0.0), 101 * T)  # the start (the period is known)
+    assert counts["starts"] == 1 and loop.plan.restarts == 1 and len(loop.plan.queued) == 1
 
 
 def test_a_lost_state_leaves_a_gap_the_law_skips_across():
@@ -137,62 +150,39 @@ def test_a_lost_state_leaves_a_gap_the_law_skips_across():
     update = loop.law.update
     loop.law.update = lambda k, *a: law_calls.append(k) or update(k, *a)
     t = 100 * T
-    loop.activate(t)
+    loop.activate()
     loop.on_joint_state(_state(t, 0.0), t)
-    loop.on_setpoint(_setpoint(100, 0.0), start=True)
-    for k in (101, 102, 103):
-        loop.on_setpoint(_setpoint(k, 0.0), start=False)
     # the state of sample 101 is lost (a 100 Hz driver: nothing else is near its time)
     assert loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T).command is not None
     assert counts["missed_samples"] == 1
     assert law_calls == [100, 102]
 
 
-def test_late_duplicate_and_missing_setpoints_are_counted():
-    loop, counts, _ = _loop()
+def test_a_plan_that_cannot_be_computed_sends_no_command_and_is_counted():
+    loop, counts, logs = _loop()
     t = 100 * T
-    loop.activate(t)
-    loop.on_joint_state(_state(t, 0.0), t)
-    loop.on_setpoint(_setpoint(100, 0.0), start=True)
-    loop.on_setpoint(_setpoint(102, 0.0), start=False)
-    loop.on_setpoint(_setpoint(102, 1.0), start=False)
-    assert counts["duplicate_setpoints"] == 1
-    loop.on_setpoint(_setpoint(100, 0.0), start=False)
-    assert counts["late_setpoints"] == 1
-    assert loop.on_joint_state(_state(t + T, 0.0), t + T).command is None  # 101 not here yet
-    assert loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T).command is not None
-    assert counts["missed_setpoint"] == 1
-    loop.on_setpoint(_setpoint(101, 0.0), start=False)
-    assert counts["late_setpoints"] == 2
-
-
-def test_a_late_setpoints_command_times_from_its_state():
-    loop, _, _ = _loop()
-    t = 100 * T + 5 * MS
-    loop.activate(t)
-    loop.on_joint_state(_state(t, 0.0), t + 300_000)
-    step = loop.on_setpoint(_setpoint(100, 0.0), start=True)
-    assert step.command is not None and loop.command_state_ns == t
-    loop.command_published(t + 2 * MS)
-    assert loop.timing.figures()["state_to_command_median_us"] == 2000.0
-    assert loop.command_state_ns is None
+    loop.activate()
+    loop.plan.fail = True
+    step = loop.on_joint_state(_state(t, 0.0), t)
+    assert step.command is None and step.sample is not None
+    assert counts["feedforward_errors"] == 1 and logs[-1][0] == "error"
 
 
 def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fresh_states():
     loop, counts, logs = _loop()
     t = 100 * T
-    loop.activate(t)
+    loop.activate()
     loop.on_joint_state(_state(t, 0.2), t)
-    loop.on_setpoint(_setpoint(100, 0.2), start=True)
     assert loop.tick(t + 5 * T) == NOTHING  # 50 ms: still within the watchdog
     step = loop.tick(t + 6 * T)  # 60 ms without a state, watchdog 50 ms
     assert step.command.tolist() == [2.0, 1.0]  # gravity, in command order (b, a)
     assert loop.command_state_ns is None  # a hold computed from no sample: no timing
     assert counts["watchdog"] == 1 and logs[-1][0] == "error" and loop.faulted
     assert loop.tick(t + 7 * T) == NOTHING
-    # the driver comes back on another cycle: the phase locks to it afresh
+    # the driver comes back on another cycle: the phase locks to it afresh, a new hold there
     step = loop.on_joint_state(_state(t + 8 * T + 7 * MS, 0.5), t + 8 * T + 7 * MS)
-    assert step.start and step.sample.position[0] == 0.5 and step.sample.stamp_ns == 108 * T
+    assert step.sample.stamp_ns == 108 * T and step.setpoint.q[0] == 0.5
+    assert step.command is not None and loop.plan.restarts == 2
     assert loop.sampler.phase_ns == 7 * MS and not loop.faulted
     assert counts["watchdog_recovered"] == 1 and counts["starts"] == 2
     assert counts["missed_samples"] == 0  # a restart's gap is no missed sample
@@ -200,7 +190,7 @@ def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fres
 
 def test_waiting_for_the_first_state_is_not_a_fault():
     loop, counts, _ = _loop(before=None)
-    loop.activate(100 * T)
+    loop.activate()
     assert loop.tick(100 * T) == NOTHING
     assert counts["no_state"] == 1 and counts["watchdog"] == 0
 
@@ -208,34 +198,33 @@ def test_waiting_for_the_first_state_is_not_a_fault():
 def test_path_tolerance_aborts_a_moving_setpoint_and_restarts_at_the_measured_position():
     loop, counts, logs = _loop(tolerance=0.1)
     t = 100 * T
-    loop.activate(t)
+    loop.activate()
     loop.on_joint_state(_state(t, 0.0), t)
-    loop.on_setpoint(_setpoint(100, 0.0), start=True)
-    loop.on_setpoint(_setpoint(101, 0.05, qd=1.0), start=False)  # within tolerance
+    loop.plan.setpoints[101] = _setpoint(101, 0.05, qd=1.0)  # within tolerance
     assert loop.on_joint_state(_state(t + T, 0.0), t + T).command is not None
     # a held (still) set point far away is no path violation; a moving one is
-    loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T)
-    step = loop.on_setpoint(_setpoint(102, 0.3, qd=1.0), start=False)
-    assert step == NOTHING  # no command: the last one stands
+    loop.plan.setpoints[102] = _setpoint(102, 0.3)
+    assert loop.on_joint_state(_state(t + 2 * T, 0.0), t + 2 * T).command is not None
+    loop.plan.setpoints[103] = _setpoint(103, 0.3, qd=1.0)
+    step = loop.on_joint_state(_state(t + 3 * T, 0.0), t + 3 * T)
+    assert step.command is None  # no command: the last one stands
     assert counts["path_tolerance_aborts"] == 1
     assert "joint 'a'" in logs[-1][1]
-    # the next sample is a start; set points of the aborted plan are dropped
-    step = loop.on_joint_state(_state(t + 3 * T, 0.1), t + 3 * T)
-    assert step.start and step.sample.stamp_ns == 103 * T and step.command is None
-    assert loop.on_setpoint(_setpoint(104, 0.3, qd=1.0), start=False).command is None
-    assert loop.on_setpoint(_setpoint(103, 0.1), start=True).command is not None
+    # the next sample is a start: the plan is dropped, the measured position held
+    step = loop.on_joint_state(_state(t + 4 * T, 0.1), t + 4 * T)
+    assert step.sample.stamp_ns == 104 * T and loop.plan.restarts == 2
+    assert step.setpoint.q.tolist() == [0.1, 0.1] and step.command is not None
 
 
 def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
     loop, _, _ = _loop(before=None)
     assert loop.deactivate() is None  # never measured: nothing to hold
     t = 100 * T
-    loop.activate(t)
+    loop.activate()
     loop.on_joint_state(_state(t, 0.0), t)
     assert loop.deactivate().tolist() == [2.0, 1.0]
     assert loop.on_joint_state(_state(t + T, 0.0), t + T) == NOTHING
     assert loop.tick(t + 10 * T) == NOTHING
-    assert loop.on_setpoint(_setpoint(100, 0.0), start=True) == NOTHING
 
 
 # -- the loop closed offline (apc_plant_sim.robot_offline) -----------------------------------------
@@ -274,9 +263,8 @@ def test_a_failing_law_step_sends_no_command_and_is_counted():
 
     loop.law.update = fail
     t = 100 * T
-    loop.activate(t)
-    loop.on_joint_state(_state(t, 0.0), t)
-    assert loop.on_setpoint(_setpoint(100, 0.0), start=True).command is None
+    loop.activate()
+    assert loop.on_joint_state(_state(t, 0.0), t).command is None
     assert counts["feedback_law_errors"] == 1 and logs[-1][0] == "error"
 
 
@@ -348,9 +336,10 @@ def test_the_first_start_waits_for_the_drivers_period():
     second (the driver's period is what a law that models its delay and the fallback's gains
     are set from), then holds the position measured then."""
     loop, counts, _ = _loop(before=None)
-    loop.activate(100 * T)
+    loop.activate()
     assert loop.on_joint_state(_state(100 * T, 0.0), 100 * T) == NOTHING
     assert counts["start_waits_for_driver_period"] == 1
     step = loop.on_joint_state(_state(101 * T, 0.01), 101 * T)
-    assert step.start and step.sample.stamp_ns == 101 * T
+    assert counts["starts"] == 1 and step.sample.stamp_ns == 101 * T
+    assert step.setpoint.q[0] == 0.01
     assert loop.sampler.driver_period_ns == T

@@ -4,9 +4,9 @@ The driver here is not apc's plant node: it publishes ``/joint_states`` stamped 
 clock at 500 Hz (not 1/T), joint names shuffled, an extra gripper joint, no velocity, and takes
 ``std_msgs/Float64MultiArray`` efforts on ``/effort_controller/commands`` (what an effort
 forward_command_controller does), integrating the PUMA with a 5 lb payload the controllers do
-not know. The controllers are ``arm --controllers`` with the shipped
-``config/puma560_3dof_robot.yaml`` in a process of their own; ``robot_node`` is driven through
-the ``lifecycle_msgs`` services. The lifecycle runs against the wall-clock driver; what needs
+not know. The controller is ``robot_node`` with the shipped ``config/puma560_3dof_robot.yaml``
+in a process of its own (the feedforward's plan sampled inside it), driven through the
+``lifecycle_msgs`` services. The lifecycle runs against the wall-clock driver; what needs
 the law's precision runs in simulated time (see :data:`TIME_SCALE`).
 """
 
@@ -50,8 +50,8 @@ COMMANDS = "/effort_controller/commands"
 SUBSTEP = 0.0005
 #: Simulated time runs at a fifth of real time: the adaptive law tolerates ~3 ms from a
 #: measurement to its torque (README "Running on a robot"), and on a loaded 2-core machine the
-#: wall-clock latencies of three DDS hops reach that; slowed down, the test is about the
-#: controllers, not about the machine.
+#: wall-clock latencies of two DDS hops reach that; slowed down, the test is about the
+#: controller, not about the machine.
 TIME_SCALE = 0.2
 T_NS = 10_000_000  # the preset's period
 #: Real seconds the simulated-time driver waits at a tick for its sample and command.
@@ -104,6 +104,7 @@ class Driver(Node):
         )
         self.create_timer(self.dt / (time_scale or 1.0), self._step)
         self.tick_offset: int | None = None  # clock at a tick minus its sample's stamp
+        self._last_sample: int | None = None  # stamp of the newest sample
         self._wait: list | None = None  # [sample stamp, since, sample seen, command seen]
         self._waits = True  # False after a wait timed out, until samples come again
         if time_scale is not None:
@@ -114,8 +115,9 @@ class Driver(Node):
         offset = self.sim_ns - stamp  # the smallest one seen is a sample that came at once
         if self.tick_offset is None:  # the driver idled at this tick: wait for its command
             self._wait = [stamp, time.monotonic(), True, False]
-        if self.tick_offset is None or msg.header.frame_id == wire.START_FRAME:
-            self.tick_offset = offset  # a (re)activation starts ticks of another phase
+        if self.tick_offset is None or stamp - (self._last_sample or 0) != T_NS:
+            self.tick_offset = offset  # after a gap (a re-activation) ticks may have another phase
+        self._last_sample = stamp
         self.tick_offset = min(self.tick_offset, offset)
         self._waits = True
         if self._wait is not None and self._wait[0] == stamp:
@@ -201,13 +203,12 @@ def _goal(node: Node, seconds: float = 1.0):
 
 @contextlib.contextmanager
 def _controllers(tmp_path: Path, **robot_node: object):
-    """``arm --controllers`` with the shipped robot preset (feedforward + robot_node), in its
-    own process as on a robot, ``robot_node`` parameters overridden by a second file; stopped
-    by SIGINT."""
+    """``robot_node`` with the shipped robot file, in its own process as on a robot, its
+    parameters overridden by a second file; stopped by SIGINT."""
     overrides = tmp_path / "overrides.yaml"
     overrides.write_text(yaml.safe_dump({"robot_node": {"ros__parameters": robot_node}}))
     log_path = tmp_path / "controllers.log"
-    cmd = [str(BIN / "arm"), "--controllers", "--ros-args", "--params-file", str(ROBOT_YAML)]
+    cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(ROBOT_YAML)]
     cmd += ["--params-file", str(overrides)]
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
@@ -278,7 +279,7 @@ def _goal_msg(goal_deg, seconds: float = 1.0) -> JointTrajectory:
 
 def _goal_publisher(graph, node: Node):
     pub = node.create_publisher(JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS)
-    graph.spin_until(lambda: pub.get_subscription_count() > 0, 30, "feedforward's goal topic")
+    graph.spin_until(lambda: pub.get_subscription_count() > 0, 30, "robot_node's goal topic")
     return pub
 
 
@@ -346,14 +347,16 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         _spin_sim(graph, driver, 0.2)
         assert len(driver.commands) == n
         # re-activated while the arm sags (the gravity hold does not know the payload): the
-        # plan restarts at the position measured then (the set point answering the start)
+        # plan restarts at the position measured then (the first set point after activation;
+        # an inactive robot_node publishes none)
         starts = []
-        observer.create_subscription(
-            JointTrajectory,
-            wire.SETPOINT,
-            lambda m: starts.append(m) if m.header.frame_id == wire.START_FRAME else None,
-            wire.CONTROL_QOS,
+        qos = wire.CONTROL_QOS
+        observer.create_subscription(JointTrajectory, wire.SETPOINT, starts.append, qos)
+        graph.spin_until(
+            lambda: observer.count_publishers(wire.SETPOINT) > 0, 10, "the set point topic"
         )
+        _spin_sim(graph, driver, 0.05)
+        assert not starts
         assert _change(graph, observer, Transition.TRANSITION_ACTIVATE)
         graph.spin_until(lambda: starts, 10, "the start's set point")
         _spin_sim(graph, driver, 0.2)

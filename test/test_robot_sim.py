@@ -308,7 +308,7 @@ def test_bad_parameter_stops_with_one_line_naming_it(tmp_path):
 
 
 def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
-    """``arm --controllers`` with the shipped robot parameter file against robot_sim (MuJoCo,
+    """``robot_node`` with the shipped robot parameter file against robot_sim (MuJoCo,
     all effects off, 5 lb the controllers do not know) on its /clock: the arm holds its start
     within 0.5 deg, then makes the paper's move and ends within 0.01 deg of the goal
     (measured: 0.001 deg)."""
@@ -321,8 +321,7 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
     arm = [
         sys.executable,
         "-m",
-        "apc_plant_sim.arm",
-        "--controllers",
+        "apc_feedback.robot_node",
         "--ros-args",
         "--params-file",
         str(CONFIG_DIR / "puma560_3dof_robot.yaml"),
@@ -351,7 +350,7 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
         graph.spin_until(lambda: running() or sim_time() >= 1.0, 60, "1 s of holding")
         held = np.rad2deg(np.array(peer.states[-1][1].position))
         assert np.abs(held - q0).max() < 0.5
-        graph.spin_until(lambda: goal_pub.get_subscription_count() > 0, 30, "the feedforward")
+        graph.spin_until(lambda: goal_pub.get_subscription_count() > 0, 30, "robot_node")
         goal_pub.publish(
             JointTrajectory(
                 joint_names=list(URDF_ORDER),

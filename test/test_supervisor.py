@@ -8,8 +8,9 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scripted_plan import ScriptedPlan
 
-from apc_core.wire import JointSample, SetpointStamped
+from apc_core.wire import JointSample
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop
@@ -21,6 +22,7 @@ from apc_feedback.supervisor import (
     SupervisorConfig,
     SupervisorError,
 )
+from apc_feedforward.nominal import Setpoint
 from apc_plant_sim.robot_offline import Latency, run_robot_loop
 
 T = 0.01
@@ -171,6 +173,7 @@ def test_a_path_tolerance_abort_hands_the_hold_to_the_fallback_if_the_law_is_uns
         law=law,
         sampling=RobotSamplingConfig(period=T, max_age=0.02, watchdog=0.05),
         command=CommandMap(("a", "b"), ("a", "b"), np.full(2, 100.0)),
+        plan=ScriptedPlan(),
         gravity=lambda q: np.zeros(2),
         path_tolerance=np.full(2, 0.1),
         count=lambda name: counts.update((name,)),
@@ -184,23 +187,23 @@ def test_a_path_tolerance_abort_hands_the_hold_to_the_fallback_if_the_law_is_uns
             JointSample(k * tick, np.full(2, q), np.zeros(2), None), k * tick
         )
 
-    def setpoint(k, q, qd=0.0, start=False):
+    def plan(k, q, qd=0.0):
         v = np.ones(2)
-        sp = SetpointStamped(k * tick, q * v, qd * v, 0 * v, 0 * v, 0)
-        return loop.on_setpoint(sp, start=start)
+        loop.plan.setpoints[k] = Setpoint(k, 0.0, q * v, qd * v, 0 * v, 0 * v)
 
     state(99, 0.0)  # the driver publishes before activation: its period is known
-    loop.activate(100 * tick)
-    assert state(100, 0.0).start
-    assert setpoint(100, 0.0, start=True).command.tolist() == [0.0, 0.0]
-    state(101, 0.0)
-    assert setpoint(101, 0.3, qd=1.0).command is None  # 0.3 rad off while moving: abort
+    loop.activate()
+    plan(100, 0.0)
+    assert state(100, 0.0).command.tolist() == [0.0, 0.0]
+    plan(101, 0.3, qd=1.0)
+    assert state(101, 0.0).command is None  # 0.3 rad off while moving: abort
     assert counts["path_tolerance_aborts"] == 1
     assert counts["supervisor.handovers"] == (0 if sound else 1)
-    assert state(102, 0.05).start
-    # the start's hold: the law's (kp 100) or the fallback's (kp 1), 0.05 rad off
+    assert state(102, 0.05).command is not None and counts["starts"] == 2  # the start's hold
+    # the hold from then on: the law's (kp 100) or the fallback's (kp 1), 0.05 rad off
     kp = 100.0 if sound else 1.0
-    assert setpoint(102, 0.1, start=True).command == pytest.approx([kp * 0.05, kp * 0.05])
+    plan(103, 0.1)
+    assert state(103, 0.05).command == pytest.approx([kp * 0.05, kp * 0.05])
 
 
 # -- the loop closed offline (apc_plant_sim.robot_offline) ----------------------------------------

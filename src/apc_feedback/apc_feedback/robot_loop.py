@@ -1,34 +1,35 @@
-"""Robot mode's control loop without ROS: samples, set points, the law, the command, faults.
+"""Robot mode's control loop without ROS: samples, the plan, the law, the command, faults.
 
 :class:`RobotLoop` is what the commanding node (``robot_node``) runs; it is told joint
-states, set points and times, never reads a clock, and answers with a :class:`Step`: the
-sample to publish for the feedforward, and the command to send, if any.
+states, goals and times, never reads a clock, and answers with a :class:`Step`: the command to
+send, if any, with the sample and the set point it came from (for observers).
 
 One sample ``k``:
 
 1. the driver's state for the sample's time arrives;
    :class:`~apc_feedback.robot_sampling.RobotSampler` takes sample ``k`` (stamped ``kT``) from
-   it in :meth:`RobotLoop.on_joint_state`; it goes out for the feedforward;
-2. the feedforward has already sent set point ``k`` (it answers sample ``k - 1`` with set
-   points up to ``k - 1 + lookahead``), so the law runs at once and the command goes out in the
-   same callback, a fixed time after the state; at a (re)start the set point arrives after
-   sample ``k``, and the law runs then;
-3. the command is ``u_n(k) + du(k)`` in ``command_joints`` order, clipped to the effort
-   limits. The add happens here, where set point and ``du`` both are: no torque message
-   between the feedforward and the command.
+   it in :meth:`RobotLoop.on_joint_state`;
+2. the feedforward's plan (:class:`apc_feedforward.goals.GoalQueue`: the goals, the hold, the
+   nominal torque of Eqs. 2-8 by Newton-Euler) gives set point ``k``, which depends only on
+   time and the goals, so it is sampled here, in the loop, as joint_trajectory_controller
+   samples its trajectory in ``update()``: the command never waits for another node;
+3. the law gives ``du(k)`` from the sample and the set point, and the command is
+   ``u_n(k) + du(k)`` in ``command_joints`` order, clipped to the effort limits, sent in the
+   same callback, a fixed time after the state. The feedforward and the feedback stay apart
+   (the paper's structure); the sum happens where both are.
 
 :meth:`RobotLoop.tick`, called by a timer, is only the watchdog below. The loop keeps the
 sampling's timing (:class:`~apc_feedback.robot_sampling.SampleTiming`, ``timing``); the node
-reports when a command went out (:meth:`RobotLoop.command_published`).
+reports when a command went out (:meth:`RobotLoop.command_published`). Goals come in through
+:meth:`RobotLoop.add_goal` and start when the motion before them ends.
 
-Starts. At activation, after a watchdog fault and after a path-tolerance abort, the sample
-goes out flagged as a *start*: the feedforward drops its plan and queued goals and holds that
-sample's measured position (a set point that stays put), and flags the set point that answers
-it. Until that set point arrives every other one is dropped (it belongs to the plan before).
-The law keeps what it identified (the payload it learned is still on the arm): restarted
-with ``F̂(0), Ĝ(0)`` of Eq. 33 and ``P(0)`` on an arm still moving (sagging after a watchdog
-hold) it diverged, with the model kept it stops the arm within a few samples. A start always
-follows a gap in ``k``, so no identification step spans the change of plan.
+Starts. At activation, after a watchdog fault and after a path-tolerance abort, the plan and
+the queued goals are dropped and the sample's measured position is held (a set point that
+stays put), from that sample on. The law keeps what it identified (the payload it learned is
+still on the arm): restarted with ``F̂(0), Ĝ(0)`` of Eq. 33 and ``P(0)`` on an arm still
+moving (sagging after a watchdog hold) it diverged, with the model kept it stops the arm within
+a few samples. A start always follows a gap in ``k`` (the abort's sample and the watchdog's
+silence get no law step), so no identification step spans the change of plan.
 
 Faults.
 
@@ -66,15 +67,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from apc_core.wire import JointSample, SetpointStamped
+from apc_core.wire import JointSample, TrajectoryGoal
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
-
-#: Samples a start waits for the set point that answers it before it is sent again: a start
-#: published before the feedforward's subscription matched (DDS discovery) is lost, and without
-#: a resend the loop would never command.
-START_RESEND_SAMPLES = 10
+from apc_feedforward.goals import GoalQueue
+from apc_feedforward.nominal import Setpoint
 
 
 class CommandMap:
@@ -133,17 +131,17 @@ class Step(NamedTuple):
 
     Attributes
     ----------
-    sample : JointSample or None
-        A sample stamped ``kT`` for the feedforward.
-    start : bool
-        ``sample`` is a start (the feedforward holds its position, see the module docstring).
     command : (n,) ndarray or None
         The command row in ``command_joints`` order.
+    sample : JointSample or None
+        The sample taken (stamped ``kT``), for observers.
+    setpoint : Setpoint or None
+        The plan's set point of that sample, for observers.
     """
 
-    sample: JointSample | None = None
-    start: bool = False
     command: np.ndarray | None = None
+    sample: JointSample | None = None
+    setpoint: Setpoint | None = None
 
 
 NOTHING = Step()
@@ -158,6 +156,9 @@ class RobotLoop:
     law : FeedbackLaw
     sampling : RobotSamplingConfig
     command : CommandMap
+    plan : GoalQueue
+        The feedforward's plan on the controller's model: set point and nominal torque of
+        every sample, the goals.
     gravity : callable
         ``g(q)`` of the controller's model (model order): the hold without feedback.
     path_tolerance : (n,) ndarray
@@ -176,6 +177,7 @@ class RobotLoop:
     law: FeedbackLaw
     sampling: RobotSamplingConfig
     command: CommandMap
+    plan: GoalQueue
     gravity: Callable[[np.ndarray], np.ndarray]
     path_tolerance: np.ndarray
     count: Callable[[str], object] = field(default=lambda name: None)
@@ -192,19 +194,16 @@ class RobotLoop:
         self.active = False
         self.faulted = False  # watchdog: silent until a fresh state
         self._restart = False  # the next sample taken is a start
-        self._start_stamp: int | None = None  # waiting for the set point answering it
-        self._setpoints: dict[int, SetpointStamped] = {}
-        self._pending: JointSample | None = None  # sample waiting for its set point
+        self._replan = False  # and drops the plan (a fault, an abort; activation drops it then)
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
-        self._taken_stamp: int | None = None  # stamp of the newest sample taken
-        self._pending_state_ns = -1  # driver stamp of the pending sample's state
-        self.command_state_ns: int | None = None  # that of the newest law command, unreported
+        self.command_state_ns: int | None = None  # driver stamp of the newest law command's
+        # state, until its publish is reported
         self.timing = SampleTiming()
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
-        """A validated joint state (model order) arriving at ``now``: sample ``k`` if it is the
-        state for one, and its command if set point ``k`` is here. Raises
+        """A validated joint state (model order) arriving at ``now``: sample ``k`` and its
+        command if it is the state for one. Raises
         :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be sampled."""
         sampler = self.sampler
         sample = sampler.offer(state, now_ns)
@@ -218,14 +217,9 @@ class RobotLoop:
             return NOTHING
         assert sampler.phase_ns is not None
         self.timing.sampled(take, sampler.phase_ns, sampler.driver_period_ns)
-        if self._pending is not None:
-            self.count("missed_setpoint")  # sample k - 1 got no set point before sample k
-            self._pending = None
         self.count("samples_taken")
-        self._taken_stamp = sample.stamp_ns
-        self._pending_state_ns = take.state_ns
         if self.faulted:
-            self.faulted, self._restart = False, True
+            self.faulted, self._restart, self._replan = False, True, True
             self.count("watchdog_recovered")
             self.log("warn", f"sample {take.k}: joint states back; holding the measured position")
         if self._restart:
@@ -234,28 +228,39 @@ class RobotLoop:
                 # command meets): it waits for the second state, which gives the period.
                 self.count("start_waits_for_driver_period")
                 return NOTHING
-            return self._start(sample)
-        waiting = self._start_stamp is not None
-        if waiting and sample.stamp_ns - self._start_stamp >= START_RESEND_SAMPLES * self.period_ns:
-            self.count("start_resends")
-            return self._start(sample)
-        self._pending = sample
-        step = self._law_step()
-        return step if step.start else step._replace(sample=sample)
+            self._start(take.k)
+        setpoint = self._setpoint(take.k, sample.position)
+        if setpoint is None:
+            return Step(sample=sample)
+        step = self._law_step(sample, setpoint)
+        if step.command is not None:
+            self.command_state_ns = take.state_ns
+        return step
 
-    def activate(self, now_ns: int) -> None:
+    def add_goal(self, goal: TrajectoryGoal) -> None:
+        """Queue a goal (model order); it starts when the motion before it ends. Raises
+        ValueError naming what is wrong (the node rejects it: counted and logged)."""
+        self.plan.add(goal)
+        self.count("goals_accepted")
+        self.log(
+            "info",
+            f"goal accepted: {len(goal.times_s)} point(s), {goal.times_s[-1]:.3f} s, "
+            f"{len(self.plan.queued)} queued",
+        )
+
+    def activate(self) -> None:
         """Start sampling with a start (hold the measured position); the first state that
-        arrives locks the samples' phase to the driver's cycle."""
+        arrives locks the samples' phase to the driver's cycle. The plan of an earlier
+        activation and its queued goals are dropped now: goals that come after it wait for the
+        first sample."""
         self.sampler.start()
-        self.active, self.faulted, self._restart = True, False, True
-        self._pending = None
+        self.active, self.faulted, self._restart, self._replan = True, False, True, False
+        self._drop_plan(None)
 
     def deactivate(self) -> np.ndarray | None:
         """Stop; the last command (gravity hold at the newest position), None without one."""
         self.sampler.stop()
         self.active, self.command_state_ns = False, None
-        self._pending, self._start_stamp = None, None
-        self._setpoints.clear()
         return self._hold_command()
 
     def tick(self, now_ns: int) -> Step:
@@ -268,7 +273,7 @@ class RobotLoop:
             return NOTHING
         if self.faulted:
             return NOTHING
-        self.faulted, self._pending, self.command_state_ns = True, None, None
+        self.faulted, self.command_state_ns = True, None
         self.sampler.start()  # the driver may come back on another cycle
         self.count("watchdog")
         self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
@@ -281,37 +286,10 @@ class RobotLoop:
             self.timing.commanded(self.command_state_ns, now_ns)
             self.command_state_ns = None
 
-    def on_setpoint(self, setpoint: SetpointStamped, start: bool) -> Step:
-        """A validated set point (model order); ``start`` if it answers a start sample."""
-        stamp = setpoint.stamp_ns
-        if self._start_stamp is not None:
-            if not (start and stamp == self._start_stamp):
-                self.count("superseded_setpoints")  # from the plan before the start
-                return NOTHING
-            self._start_stamp = None
-        if stamp in self._setpoints:
-            self.count("duplicate_setpoints")  # the first one stands
-            return NOTHING
-        taken = self._taken_stamp
-        if taken is not None and (stamp < taken or (stamp == taken and self._pending is None)):
-            self.count("late_setpoints")  # its sample is done (or gone)
-            return NOTHING
-        self._setpoints[stamp] = setpoint
-        if len(self._setpoints) > 32:  # bounded: a feedforward far ahead is not followed
-            del self._setpoints[min(self._setpoints)]
-        return self._law_step()
-
     # -- the loop -------------------------------------------------------------------------------
-    def _law_step(self) -> Step:
-        """:meth:`_try`, noting the state a command is computed from."""
-        state_ns = self._pending_state_ns
-        step = self._try()
-        if step.command is not None:
-            self.command_state_ns = state_ns
-        return step
-
-    def _start(self, sample: JointSample) -> Step:
-        """Send ``sample`` as a start; its set point arrives later.
+    def _start(self, k: int) -> None:
+        """Sample ``k`` is a start: the plan and the queued goals are dropped, and the measured
+        position is held from ``k`` on.
 
         A law that models its input's delay (``AdaptiveFeedback`` with ``input_lags``) is told
         the delay it splits ``Ĝ(0)`` by at its next (re)start: one driver period, measured from
@@ -326,25 +304,43 @@ class RobotLoop:
         if self.supervisor is not None and driver_period > 0.0:
             if self.fallback is not None and self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
-        self._restart = False
-        self._start_stamp = sample.stamp_ns
-        self._setpoints.clear()
-        self._pending = sample
+        if self._replan:
+            self._drop_plan(k)
+        self._restart = self._replan = False
         self.count("starts")
-        return Step(sample=sample, start=True)
 
-    def _try(self) -> Step:
-        """Run the law on the pending sample if its set point is here: the command; nothing
-        when the path tolerance aborts the goal (the next sample is a start)."""
-        sample = self._pending
-        if sample is None or self._start_stamp is not None:
-            return NOTHING
-        setpoint = self._setpoints.pop(sample.stamp_ns, None)
-        if setpoint is None:
-            return NOTHING  # the feedforward is late; the set point may follow
-        for old in [s for s in self._setpoints if s < sample.stamp_ns]:
-            del self._setpoints[old]
-        self._pending = None
+    def _drop_plan(self, k: int | None) -> None:
+        dropped = self.plan.restart()
+        if dropped:
+            self.count("goals_dropped")
+            where = "activation" if k is None else f"sample {k}"
+            self.log("warn", f"{where}: start, {dropped} queued goal(s) dropped")
+
+    def _setpoint(self, k: int, position: np.ndarray) -> Setpoint | None:
+        """The plan's set point of sample ``k`` (``position``: the measured one, where a start
+        holds); what the plan did on the way counted and logged. None if not even a hold could
+        be computed (counted: ``feedforward_errors``)."""
+        out = self.plan.sample(k, position, lambda sp: sp)
+        for exc in out.refused:
+            self.count("goals_refused")
+            self.log("error", f"sample {k}: goal refused when it was to start: {exc}")
+        for duration in out.started:
+            self.count("goals_started")
+            self.log("info", f"sample {k}: starting a {duration:.3f} s goal")
+        if out.plan_error is not None:
+            self.count("plan_errors")
+            self.log(
+                "error",
+                f"sample {k}: {out.plan_error}; dropping the plan, holding the last set point",
+            )
+        if out.failed is not None:
+            self.count("feedforward_errors")
+            self.log("error", f"sample {k}: {out.failed}; no command")
+        return out.setpoint
+
+    def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:
+        """The law on ``sample`` and its set point: the command; none when the path tolerance
+        aborts the goal (the next sample is a start)."""
         assert sample.position is not None and sample.velocity is not None
         error = np.abs(sample.position - setpoint.q)
         tolerance = self.path_tolerance
@@ -353,7 +349,7 @@ class RobotLoop:
             self.count("path_tolerance_aborts")
             self.log(
                 "error",
-                f"sample {sample.stamp_ns // self.period_ns}: tracking error {error[j]:.4g} rad "
+                f"sample {setpoint.k}: tracking error {error[j]:.4g} rad "
                 f"on joint {self.command.model_joints[j]!r} beyond its path tolerance "
                 f"{tolerance[j]:.4g} rad; goal aborted, holding the measured position",
             )
@@ -362,8 +358,7 @@ class RobotLoop:
             # A supervised loop holds that start with the fallback when the law's identified
             # model is outside the supervisor's region (input_gain): a diverging law must not
             # hold the arm. A law whose model is sound holds it better than the fallback, which
-            # does not know a payload (computed torque sags 1.7 deg under the PUMA's 5 lb,
-            # test_robot_mode's abort holds within 0.5 deg); the triggers keep watching it.
+            # does not know a payload; the triggers keep watching it.
             supervisor = self.supervisor
             if (
                 supervisor is not None
@@ -371,10 +366,9 @@ class RobotLoop:
                 and supervisor.input_gain(self.law) is not None
             ):
                 supervisor.hand_over("path_tolerance")
-                self._hand_over(sample.stamp_ns // self.period_ns, "path tolerance abort")
-            self._restart = True
-            self._setpoints.clear()
-            return NOTHING
+                self._hand_over(setpoint.k, "path tolerance abort")
+            self._restart = self._replan = True
+            return Step(sample=sample, setpoint=setpoint)
         k = sample.stamp_ns // self.period_ns
         sent = self._sent
         applied = sent[1] if sent is not None and sent[0] == k - 1 else None
@@ -384,7 +378,7 @@ class RobotLoop:
         else:
             out = self._supervised(args, setpoint.u_n, applied)
         if out is None:
-            return NOTHING  # no command, the last one stands
+            return Step(sample=sample, setpoint=setpoint)  # no command, the last one stands
         row = self.command(setpoint.u_n + out.du)
         self._sent = (k, self.command.to_model(row))
         self.count("commands")
@@ -392,7 +386,7 @@ class RobotLoop:
             self.count("rls_skipped_updates")
         if out.rejected:
             self.count("rls_rejected_updates")
-        return Step(command=row)
+        return Step(command=row, sample=sample, setpoint=setpoint)
 
     def _update(
         self, law: FeedbackLaw, args: tuple, u_n: np.ndarray, applied: np.ndarray | None

@@ -13,13 +13,17 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
 - ``activate`` starts sampling in step with the driver: the first joint state locks the
   samples' phase to the driver's cycle, and sample k is taken in the callback of the driver's
   state for the time kT + phase (the nearest one, carried to that time when the driver's period
-  does not divide T), stamped kT, and sent on ``feedback/sample`` to the feedforward
-  (``feedforward_node`` with ``mode: robot``), which answers with set point k + lookahead on
-  ``feedforward/setpoint``. The first sample holds the measured position, goals on
-  ``feedforward/trajectory`` are then tracked from it. The command ``u_n(k) + du(k)`` goes out
-  in the same callback (set point k is already here) as ``std_msgs/Float64MultiArray`` on
-  ``command_topic`` in ``command_joints`` order, clipped to the URDF's effort limits, with the
-  QoS forward_command_controller subscribes with (``SystemDefaultsQoS``);
+  does not divide T), stamped kT. The feedforward's plan, inside this node
+  (:class:`apc_feedforward.goals.GoalQueue`, as joint_trajectory_controller samples its
+  trajectory in ``update()``), gives set point k and its nominal torque ``u_n(k)``: the first
+  sample holds the measured position (or starts ``move.goal_deg``), goals on
+  ``feedforward/trajectory`` (``trajectory_msgs/JointTrajectory``, any joint order) start when
+  the motion before them ends. The command ``u_n(k) + du(k)`` goes out in the same callback as
+  ``std_msgs/Float64MultiArray`` on ``command_topic`` in ``command_joints`` order, clipped to
+  the URDF's effort limits, with the QoS forward_command_controller subscribes with
+  (``SystemDefaultsQoS``). For observers (a recorder), the sample goes out on
+  ``feedback/sample`` and its set point on ``feedforward/setpoint`` when someone listens;
+  goals are taken only while active;
 - ``deactivate`` sends one command holding the arm against gravity at the measured position
   (the controller's model) and then none: forward_command_controller keeps applying the last
   command it got, and an inactive controller must leave the joints to whoever takes them over;
@@ -65,7 +69,6 @@ from apc_core.nodeutil import (
     CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
-    Stopwatch,
     controller_robot_from_params,
     guarded,
     print_help,
@@ -84,6 +87,7 @@ from apc_feedback.robot_sampling import (
     StateRejectedError,
 )
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, SupervisorError, fallback_law
+from apc_feedforward.goals import MOVE_PARAMS, GoalQueue
 
 AUTOSTART_FLAG = "--autostart"
 
@@ -119,6 +123,7 @@ PARAMS: tuple[Param, ...] = (
         "joint order of the command (the controller's 'joints'); empty = the URDF's order",
         array_of=str,
     ),
+    *MOVE_PARAMS,
     *params_from(RobotSamplingConfig, ""),
     Param(
         "path_tolerance",
@@ -204,6 +209,7 @@ class RobotNode(LifecycleNode):
             law=law,
             sampling=sampling,
             command=command,
+            plan=GoalQueue.from_params(robot, values),
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=path_tolerance,
             count=diag.count,
@@ -211,13 +217,16 @@ class RobotNode(LifecycleNode):
             **supervision,
         )
         diag.timing = self.loop.timing
+        self._period_ns = wire.seconds_to_ns(values["period"])
         self._sample_msg = JointState()
+        self._setpoint_msg = JointTrajectory()
         self._command_msg = Float64MultiArray()
         qos = wire.CONTROL_QOS
         self.command_pub = self.create_publisher(
             Float64MultiArray, topic, QoSPresetProfiles.SYSTEM_DEFAULT.value
         )
         self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, qos)
+        self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
         # Best effort matches a driver's reliable and best-effort publishers alike; only the
         # newest state is ever used.
         states = self.create_subscription(
@@ -226,13 +235,13 @@ class RobotNode(LifecycleNode):
             guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
             QoSPresetProfiles.SENSOR_DATA.value,
         )
-        setpoints = self.create_subscription(
+        goals = self.create_subscription(
             JointTrajectory,
-            wire.SETPOINT,
-            guarded(self, diag, wire.SETPOINT, self._on_setpoint),
-            qos,
+            wire.TRAJECTORY_GOAL,
+            guarded(self, diag, wire.TRAJECTORY_GOAL, self._on_goal),
+            wire.TRAJECTORY_GOAL_QOS,
         )
-        self._entities = [self.command_pub, self.sample_pub, states, setpoints]
+        self._entities = [self.command_pub, self.sample_pub, self.setpoint_pub, states, goals]
         self.get_logger().info(
             f"configured: {n} joints, T = {values['period']} s, command on '{topic}' in "
             f"order {list(command_joints)}"
@@ -260,7 +269,7 @@ class RobotNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.loop is not None
-        self.loop.activate(self._now())
+        self.loop.activate()
         self._timer = self.create_timer(
             self.loop.sampling.period,
             guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog),
@@ -347,18 +356,14 @@ class RobotNode(LifecycleNode):
         if step.sample is not None:
             self._show_state(loop)
 
-    def _on_setpoint(self, msg: JointTrajectory) -> None:
+    def _on_goal(self, msg: JointTrajectory) -> None:
         loop = self.loop
-        if loop is None or not loop.active:
-            return
         try:
-            setpoint = wire.msg_to_setpoint(msg, self.joint_names)
-        except wire.WireError as exc:
-            reject(self, self.diagnostics, wire.SETPOINT, exc)
-            return
-        with Stopwatch(self.diagnostics, "compute"):
-            step = loop.on_setpoint(setpoint, msg.header.frame_id == wire.START_FRAME)
-        self._publish(step)
+            if loop is None or not loop.active:
+                raise wire.WireError("robot_node is not active: goals are taken only while active")
+            loop.add_goal(wire.msg_to_trajectory_goal(msg, self.joint_names))
+        except ValueError as exc:  # WireError, TrajectoryError
+            reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
 
     def _on_watchdog(self) -> None:
         loop = self.loop
@@ -373,23 +378,38 @@ class RobotNode(LifecycleNode):
         diag.message = "watchdog: no fresh joint state" if loop.faulted else "active"
 
     def _publish(self, step: Step) -> None:
-        # The command first: the driver waits for it, the feedforward is a sample ahead.
+        # The command first: the driver waits for it; the rest is for observers, built only
+        # for a listener.
         if step.command is not None:
             self._command_msg.data = step.command.tolist()
             self.command_pub.publish(self._command_msg)
             assert self.loop is not None
             self.loop.command_published(self._now())
-        sample = step.sample
-        if sample is not None:
-            msg = wire.arrays_to_joint_state(
-                sample.stamp_ns,
-                self.joint_names,
-                sample.position,
-                sample.velocity,
-                msg=self._sample_msg,
+        sample, setpoint = step.sample, step.setpoint
+        if sample is not None and self.sample_pub.get_subscription_count():
+            self.sample_pub.publish(
+                wire.arrays_to_joint_state(
+                    sample.stamp_ns,
+                    self.joint_names,
+                    sample.position,
+                    sample.velocity,
+                    msg=self._sample_msg,
+                )
             )
-            msg.header.frame_id = wire.START_FRAME if step.start else ""
-            self.sample_pub.publish(msg)
+        if setpoint is not None and self.setpoint_pub.get_subscription_count():
+            t_ns = wire.seconds_to_ns(setpoint.t) if setpoint.t > 0 else 0
+            self.setpoint_pub.publish(
+                wire.setpoint_to_msg(
+                    wire.sample_stamp_ns(setpoint.k, self._period_ns),
+                    self.joint_names,
+                    setpoint.q,
+                    setpoint.qd,
+                    setpoint.qdd,
+                    setpoint.u_n,
+                    t_ns,
+                    self._setpoint_msg,
+                )
+            )
 
 
 def _help() -> None:

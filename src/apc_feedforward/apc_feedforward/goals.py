@@ -199,7 +199,8 @@ class GoalQueue:
 
     def restart(self) -> int:
         """Drop the plan and the queued goals (robot mode's start: activation, a watchdog
-        recovery, an aborted goal); the next sample holds its measured position. The first move
+        recovery, an aborted goal, :mod:`apc_feedback.robot_loop`); the next sample holds its
+        measured position. The first move
         is only ever the first plan. Returns how many queued goals were dropped."""
         dropped = len(self.queued)
         self.queued.clear()
@@ -304,12 +305,6 @@ class Lookahead:
         self._last_stamp = stamp_ns
         first = k if self._next_k is None else max(self._next_k, k)
         return Due(range(first, k + self.lookahead + 1))
-
-    def restart(self) -> None:
-        """Forget every joint state handled: the next one is answered from its own sample on
-        (robot mode's start, see :meth:`GoalQueue.restart`)."""
-        self._last_stamp, self._next_k = None, None
-        self._sent = {}
 
     def sent(self, sp: Setpoint) -> None:
         """Set point ``sp`` went out."""

@@ -18,12 +18,9 @@ The plan: at the first joint state the arm's measured position becomes the start
 ``feedforward/trajectory`` (any joint order) are planned from the end of the current motion
 and start when it ends; after the last motion the final set point is held.
 
-Robot mode (``mode: robot``): the samples are ``robot_node``'s, on ``feedback/sample`` in
-place of the plant's ``joint_states``, and no ``feedforward/torque`` goes out (robot_node adds
-``u_n`` from the set point). A sample flagged as a start (``header.frame_id`` =
-``apc/start``: activation, a watchdog recovery, an aborted goal) drops the plan and the
-queued goals and holds that sample's position; the set point answering it carries the flag,
-so robot_node can tell it from set points of the plan before.
+This node runs beside apc's plant. On a robot, ``robot_node`` samples the same plan
+(:class:`apc_feedforward.goals.GoalQueue`) inside its commanding loop, so no set point crosses
+DDS there.
 """
 
 from __future__ import annotations
@@ -47,22 +44,13 @@ from apc_core.nodeutil import (
     reject,
     run_node,
 )
-from apc_core.params import ConfigError, Param, declare
+from apc_core.params import Param, declare
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled
 from apc_feedforward.nominal import Setpoint
-
-#: Where samples come from (the ``mode`` parameter) -> the topic they arrive on.
-MODES = {"grid": wire.JOINT_STATES, "robot": wire.SAMPLE}
 
 PARAMS: tuple[Param, ...] = (
     *CONTROLLER_ROBOT_PARAMS,
     *MOVE_PARAMS,
-    Param(
-        "mode",
-        "grid",
-        "where samples come from: 'grid' (apc's plant on joint_states) or 'robot' (robot_node's "
-        "samples of a driver's joint states on feedback/sample, which can restart the plan)",
-    ),
     Param(
         "lookahead",
         1,
@@ -97,24 +85,18 @@ class FeedforwardNode(Node):
         self.period_ns = wire.seconds_to_ns(self.period)
         self.goals = GoalQueue.from_params(self.controller_robot, values)
         self.lookahead = Lookahead(values["lookahead"])
-        self.mode = values["mode"]
-        if self.mode not in MODES:
-            raise ConfigError(f"parameter 'mode': must be one of {', '.join(MODES)}")
-        self._start_k: int | None = None  # sample of the last start (robot mode)
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
         self._setpoint_msg = JointTrajectory()
         self._torque_msg = JointState()
 
         self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
-        self.torque_pub = (
-            self.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, qos)
-            if self.mode == "grid"
-            else None
-        )
+        self.torque_pub = self.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, qos)
         diag = self.diagnostics
-        samples = MODES[self.mode]
         self.create_subscription(
-            JointState, samples, guarded(self, diag, samples, self._on_joint_state), qos
+            JointState,
+            wire.JOINT_STATES,
+            guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
+            qos,
         )
         self.create_subscription(
             JointTrajectory,
@@ -141,8 +123,6 @@ class FeedforwardNode(Node):
         try:
             sample = wire.joint_state_to_arrays(msg, self.joint_names, require=("position",))
             k = wire.sample_index(sample.stamp_ns, self.period_ns)
-            if msg.header.frame_id == wire.START_FRAME:
-                self._restart(k)
             due = self.lookahead.due(sample.stamp_ns, k)
         except wire.WireError as exc:
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
@@ -163,16 +143,6 @@ class FeedforwardNode(Node):
             self.lookahead.sent(out.setpoint)
         self.lookahead.answered(k)
         self.diagnostics.count("samples")
-
-    def _restart(self, k: int) -> None:
-        """A start sample (robot mode): its position is held from sample ``k`` on."""
-        dropped = self.goals.restart()
-        self.lookahead.restart()
-        self._start_k = k
-        self.diagnostics.count("starts")
-        if dropped:
-            self.diagnostics.count("goals_dropped", dropped)
-            self.get_logger().warn(f"sample {k}: restart, {dropped} queued goal(s) dropped")
 
     def _report(self, k: int, out: Sampled[Any]) -> None:
         """Counters and log lines of what the goal queue did at sample ``k``."""
@@ -197,14 +167,12 @@ class FeedforwardNode(Node):
         setpoint = wire.setpoint_to_msg(
             stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
         )
-        setpoint.header.frame_id = wire.START_FRAME if sp.k == self._start_k else ""
         torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
         return setpoint, torque
 
     def _publish(self, setpoint: JointTrajectory, torque: JointState) -> None:
         self.setpoint_pub.publish(setpoint)
-        if self.torque_pub is not None:
-            self.torque_pub.publish(torque)
+        self.torque_pub.publish(torque)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -2,15 +2,13 @@
 
     arm --ros-args --params-file config/puma560_3dof.yaml [-r __ns:=/arm0]
     arm --controllers --ros-args --params-file ...    # feedforward + feedback only
-    arm --controllers --ros-args --params-file config/puma560_3dof_robot.yaml   # a robot
 
 The same ``plant_node``, ``feedforward_node`` and ``feedback_node`` as the three executables,
 built in one process: each reads its own section of the parameters file, a namespace remap
 applies to all, and topics, QoS and ``ros2 param`` are those of the separate executables.
-``--controllers`` leaves the plant out: beside a ``plant_node`` of its own, or, when the
-feedforward's ``mode`` is ``robot``, with ``robot_node`` (the lifecycle commanding node of
-:mod:`apc_feedback.robot_node`) in place of ``feedback_node``, for a ros2_control robot whose
-driver publishes ``/joint_states`` and takes efforts on ``command_topic``.
+``--controllers`` leaves the plant out, for a ``plant_node`` of its own. A ros2_control robot
+is commanded by one node, ``robot_node`` (:mod:`apc_feedback.robot_node`), which samples the
+feedforward's plan itself.
 
 Why: a message between processes costs ~100-150 us of CPU on each side (DDS, a thread wake-up
 per message), one between nodes of a process ~20 us (``bench/ros_loop.py``). Composition is
@@ -29,8 +27,6 @@ from rclpy.node import Node
 from apc_core.nodeutil import print_help, run_nodes
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
 from apc_feedback.node import FeedbackNode
-from apc_feedback.robot_node import PARAMS as ROBOT_PARAMS
-from apc_feedback.robot_node import RobotNode
 from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS
 from apc_feedforward.node import FeedforwardNode
 from apc_plant_sim.node import PARAMS as PLANT_PARAMS
@@ -45,8 +41,6 @@ def _help(controllers_only: bool) -> None:
         ("feedforward_node", FEEDFORWARD_PARAMS),
         ("feedback_node", FEEDBACK_PARAMS),
     ]
-    if controllers_only:
-        sections.append(("robot_node (with feedforward_node mode: robot)", ROBOT_PARAMS))
     if not controllers_only:
         sections.insert(0, ("plant_node", PLANT_PARAMS))
     for name, params in sections:
@@ -67,9 +61,7 @@ def main(args: Sequence[str] | None = None) -> int:
         return 2
 
     def make_nodes() -> list[Node]:
-        feedforward = FeedforwardNode()
-        robot = controllers_only and feedforward.mode == "robot"
-        nodes: list[Node] = [feedforward, RobotNode() if robot else FeedbackNode()]
+        nodes: list[Node] = [FeedforwardNode(), FeedbackNode()]
         if not controllers_only:
             nodes.append(PlantNode())  # last: it starts the run once the others listen
         return nodes

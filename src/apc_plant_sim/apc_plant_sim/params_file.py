@@ -3,14 +3,14 @@
     apc_params --urdf my_arm.urdf --out my_arm.yaml [--lock-joints finger_1 finger_2]
     arm --ros-args --params-file my_arm.yaml
     apc_params --urdf my_arm.urdf --out my_robot.yaml --robot-mode     # a ros2_control robot
-    arm --controllers --ros-args --params-file my_robot.yaml
+    robot_node --ros-args --params-file my_robot.yaml
 
 The file has one section per node (``/**`` for what all share). Active lines are what this
 URDF needs: where it is, the joints to lock, and the per-joint defaults derived from it
 (:mod:`apc_core.defaults`: start at the middle of each joint's range, a first move inside it,
 the paper's +-10 % inertia error pattern for the simulated controllers' model, the payload on
-the last link; with ``--robot-mode``, the feedforward in robot mode and ``robot_node``
-started at once with ``command_joints`` in the URDF's order, and no simulated model error).
+the last link; with ``--robot-mode``, ``robot_node`` alone, started at once with
+``command_joints`` in the URDF's order, and no simulated model error).
 Every other parameter of each node follows as a comment with its default and
 meaning, so the file shows all there is to set and the nodes keep their own defaults until a
 line is uncommented. The file starts the nodes as written (``test/test_params_file.py``).
@@ -81,7 +81,7 @@ def render(
 ) -> str:
     """The parameter file's text for the arm of ``urdf`` with its derived ``defaults``: apc's
     simulated arm (plant, feedforward, feedback), or with ``robot_mode`` the controllers of a
-    ros2_control robot (feedforward in robot mode, robot_node)."""
+    ros2_control robot (robot_node)."""
     shared: dict[str, tuple[Any, str]] = {"robot_description_path": (urdf, "the arm")}
     if not robot_mode:  # a real arm's model error is whatever it is: none is added
         shared["inertia_error"] = (
@@ -101,10 +101,8 @@ def render(
     body = [*_section("/**", _unique(shared_rows), shared, ()), ""]
     if robot_mode:
         header += [
-            "#   arm --controllers --ros-args --params-file <this file>   # one process",
             "#   ros2 run apc_feedback robot_node --ros-args --params-file <this file>",
         ]
-        feedforward = {"mode": ("robot", "samples from robot_node's reading of the driver")}
         robot = {
             "autostart": (True, "configure and activate at start (else: ros2 lifecycle set)"),
             "command_joints": (
@@ -112,11 +110,7 @@ def render(
                 "the URDF's moving joints in order: make it your effort controller's 'joints'",
             ),
         }
-        body += [
-            *_section("feedforward_node", FEEDFORWARD_PARAMS, feedforward, SHARED),
-            "",
-            *_section("robot_node", ROBOT_NODE_PARAMS, robot, SHARED),
-        ]
+        body += _section("robot_node", ROBOT_NODE_PARAMS, robot, SHARED)
     else:
         header += [
             "#   arm --ros-args --params-file <this file>          # the three nodes, one process",
@@ -169,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--robot-mode",
         action="store_true",
-        help="for a ros2_control robot: feedforward in robot mode and robot_node, no plant",
+        help="for a ros2_control robot: robot_node, no plant",
     )
     parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     return parser

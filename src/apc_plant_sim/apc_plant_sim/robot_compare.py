@@ -1,10 +1,10 @@
 """``robot_compare``: the comparison a ROS user would make, through the robot interface.
 
 The simulated ros2_control robot (:mod:`apc_plant_sim.robot_sim`, engine MuJoCo) and apc's
-robot-mode controllers (the feedforward with ``mode: robot`` and the lifecycle commanding node
-``robot_node``, autostarted) run composed in one process with the recorder. The arm holds its
-measured position for :data:`HOLD_BEFORE_S`; then the paper's move goes to the feedforward as a
-goal on ``feedforward/trajectory``, the way a user sends one: the 4-3-4's lift-off, set-down and
+robot-mode controller (the lifecycle commanding node ``robot_node``, autostarted, which samples
+the feedforward's plan itself) run composed in one process with the recorder. The arm holds its
+measured position for :data:`HOLD_BEFORE_S`; then the paper's move goes to robot_node as a goal
+on ``feedforward/trajectory``, the way a user sends one: the 4-3-4's lift-off, set-down and
 end as waypoints with their velocities and accelerations (the feedforward plans quintic segments
 through them, and a quintic meeting a quartic's or a cubic's position, velocity and acceleration
 at both ends is that polynomial: the plan is the 4-3-4 itself). The run ends
@@ -87,8 +87,8 @@ COMMAND_LATENCY_S = 0.0005
 SUMMARY = (
     "The simulated ros2_control robot (robot_sim: joint_state_broadcaster-style `/joint_states` "
     f"at {DRIVER_RATE_HZ:g} Hz, efforts as `Float64MultiArray` on `/effort_controller/commands`; "
-    "MuJoCo's dynamics) and the robot-mode controllers (feedforward `mode: robot`, lifecycle "
-    "`robot_node`, T = 10 ms), composed in one process on sim time. The arm holds "
+    "MuJoCo's dynamics) and the robot-mode controller (lifecycle `robot_node` with the "
+    "feedforward's plan inside, T = 10 ms), composed in one process on sim time. The arm holds "
     f"{HOLD_BEFORE_S:g} s, then the paper's move arrives as a goal on `feedforward/trajectory`; "
     "errors are the controllers' samples against their set points, from the move's start. "
     f"Every command reaches the driver {COMMAND_LATENCY_S * 1e3:g} ms after the state it "
@@ -246,7 +246,6 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
     inertia_error = [float(v) for v in sc.inertia_error]
     controller, settings = law_of(case)
     period = float(sc.period)
-    feedforward = {**shared, "period": period, "mode": "robot", "inertia_error": inertia_error}
     robot_node = {
         **shared,
         "period": period,
@@ -270,7 +269,7 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
         "command_latency": COMMAND_LATENCY_S,
         "sim_cycles_per_command": round(DRIVER_RATE_HZ * period),
     }
-    return {"feedforward_node": feedforward, "robot_node": robot_node, "robot_sim": robot_sim}
+    return {"robot_node": robot_node, "robot_sim": robot_sim}
 
 
 def goal_message(scenario: Scenario, joint_names: Sequence[str]) -> JointTrajectory:
@@ -332,7 +331,6 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
     every node destroyed, and the outcome says ``interrupted``.
     """
     from apc_feedback.robot_node import RobotNode
-    from apc_feedforward.node import FeedforwardNode
     from apc_plant_sim.robot_sim import RobotSimNode
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -351,12 +349,6 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
             clock = [Parameter("use_sim_time", value=sim)]
             recorder = recorder_node(path, context, describe(case), sim)
             nodes.append(recorder)
-            nodes.append(
-                FeedforwardNode(
-                    context=context,
-                    parameter_overrides=clock + overrides(params["feedforward_node"]),
-                )
-            )
             controller = RobotNode(
                 context=context, parameter_overrides=clock + overrides(params["robot_node"])
             )

@@ -4,8 +4,8 @@ What :mod:`apc_plant_sim.offline` is for the lockstep wire, this is for robot mo
 stepped by a driver every ``driver_ms`` (it reports positions only, stamped with its time),
 :class:`apc_feedback.robot_loop.RobotLoop` offered each state ``transport_ms`` after its stamp
 (the trip to the controllers and their wake-up) and taking its samples from them, its
-watchdog checked every T, and a feedforward answering each sample with set points up to
-``k + 1`` (lookahead 1), all on one synthetic clock. A command leaves when its state arrives
+watchdog checked every T, the loop sampling the feedforward's plan itself, all on one synthetic
+clock. A command leaves when its state arrives
 and reaches the driver at its first cycle after that, plus a latency that :class:`Latency`
 chooses per command: the delay a drive or a network adds, on time or late. The 3-joint PUMA
 560 with 10 % inertia error in the controllers and a payload they do not know. Used by
@@ -24,14 +24,14 @@ import numpy as np
 import pinocchio as pin
 
 from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
-from apc_core.wire import JointSample, SetpointStamped
+from apc_core.wire import JointSample
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
-from apc_feedforward.nominal import Feedforward
-from apc_feedforward.trajectory import FourThreeFour, Quintic
+from apc_feedforward.goals import GoalQueue
+from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import CONFIG_DIR
 
@@ -160,6 +160,7 @@ def run_robot_loop(
         law=AdaptiveFeedback(controller.model, config),
         sampling=RobotSamplingConfig(period=T),
         command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
+        plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,
         count=lambda name: counts.update((name,)),
@@ -170,38 +171,28 @@ def run_robot_loop(
         setup(loop)
     latency = latency or Latency()
     transport = round(transport_ms * MS)
-    ff: list = []  # [Feedforward, next k]
     log: list[tuple] = []
     pending: list[tuple[int, np.ndarray]] = []  # (when the driver applies it, torque)
     # Before activation another controller holds the arm (the true gravity torque).
     torque = pin.computeGeneralizedGravity(plant_robot.model, plant_robot.model.createData(), q0)
-
-    def feedforward(sample: JointSample, start: bool) -> list[Step]:
-        if start:
-            hold = Quintic(sample.position, sample.position, T)
-            ff[:] = [Feedforward(controller.model, hold, T, sample.stamp_ns // T_NS), None]
-            if goal_deg is not None:
-                move = FourThreeFour(sample.position, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
-                ff[0].set_trajectory(move, sample.stamp_ns // T_NS + round(0.2 / T))
-        k = sample.stamp_ns // T_NS
-        first = k if start else max(ff[1], k)
-        steps = []
-        for j in range(first, k + 2):
-            sp = ff[0].sample(j)
-            setpoint = SetpointStamped(j * T_NS, sp.q, sp.qd, sp.qdd, sp.u_n, 0)
-            steps.append(loop.on_setpoint(setpoint, start=start and j == k))
-        ff[1] = k + 2
-        return steps
+    moved = goal_deg is None
 
     def handle(step: Step, now: int) -> None:
+        nonlocal moved
         if step.command is not None:
             # The driver has run its cycle at ``now`` (if one falls there): the next one applies it.
             pending.append((now + 1 + latency.next_ns(), loop.command.to_model(step.command)))
             pending.sort(key=lambda arrival: arrival[0])  # the newest arrival is applied
             loop.command_published(now)
-        if step.sample is not None:
-            for answer in feedforward(step.sample, step.start):
-                handle(answer, now)
+        plan = loop.plan.feedforward
+        if not moved and plan is not None and step.setpoint is not None:
+            # The move, from the held position, starts 0.2 s after the first sample (a user's
+            # goal; a 4-3-4 as the feedforward's first move).
+            assert goal_deg is not None
+            start = step.setpoint.q
+            move = FourThreeFour(start, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
+            plan.set_trajectory(move, step.setpoint.k + round(0.2 / T))
+            moved = True
 
     # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
     # driver cycle comes first, then a state's arrival, then the watchdog's check; activation is
@@ -235,11 +226,11 @@ def run_robot_loop(
             index, state = payload
             step = loop.on_joint_state(state, now)
             handle(step, now)
-            if step.sample is not None and ff:
-                log[index] = (*log[index][:2], ff[0].sample(step.sample.stamp_ns // T_NS).q)
+            if step.setpoint is not None:
+                log[index] = (*log[index][:2], step.setpoint.q)
         else:
             if not loop.active:
-                loop.activate(now)
+                loop.activate()
             handle(loop.tick(now), now)
             heapq.heappush(events, (now + T_NS, WATCHDOG, order, None))
         order += 1

@@ -22,8 +22,8 @@ Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and 
   :data:`CONTROL_QOS`
 - ``ESTIMATE``: ``std_msgs/Float64MultiArray`` (:func:`estimate_to_msg`), :data:`CONTROL_QOS`
 - ``TRAJECTORY_GOAL``: ``trajectory_msgs/JointTrajectory``, :data:`TRAJECTORY_GOAL_QOS`
-- ``SAMPLE`` (robot mode): ``sensor_msgs/JointState`` (position, velocity; ``header.frame_id``
-  :data:`START_FRAME` on a start), :data:`CONTROL_QOS`
+- ``SAMPLE`` (robot mode, for observers): ``sensor_msgs/JointState`` (position, velocity),
+  :data:`CONTROL_QOS`
 - ``CLOCK`` (absolute): ``rosgraph_msgs/Clock``, :data:`CLOCK_QOS`
 - ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
 
@@ -91,7 +91,6 @@ from apc_core.wire.topics import (
     MAX_LOOKAHEAD,
     SAMPLE,
     SETPOINT,
-    START_FRAME,
     TOPICS,
     TRAJECTORY_GOAL,
     TRAJECTORY_GOAL_QOS,
@@ -118,7 +117,6 @@ __all__ = [
     "NS_PER_S",
     "SAMPLE",
     "SETPOINT",
-    "START_FRAME",
     "TOPICS",
     "TRAJECTORY_GOAL",
     "TRAJECTORY_GOAL_QOS",

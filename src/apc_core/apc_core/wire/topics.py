@@ -17,7 +17,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 #: plant -> all: ``q``, ``q̇`` at sample k; ``effort`` = torque applied over the period ending at k.
 JOINT_STATES = "joint_states"
-#: feedforward -> feedback, recorder: the planned set point of sample k (one-point trajectory).
+#: feedforward -> feedback, recorder: the planned set point of sample k (one-point trajectory);
+#: in robot mode robot_node's plan, for observers.
 SETPOINT = "feedforward/setpoint"
 #: feedforward -> plant: the nominal torque ``u_n(k)`` (JointState, name + effort only).
 FEEDFORWARD_TORQUE = "feedforward/torque"
@@ -25,15 +26,11 @@ FEEDFORWARD_TORQUE = "feedforward/torque"
 FEEDBACK_TORQUE = "feedback/torque"
 #: feedback -> recorder: identification telemetry (see :func:`estimate_to_msg`).
 ESTIMATE = "feedback/estimate"
-#: user -> feedforward: a new goal (waypoints) to plan and run.
+#: user -> feedforward (robot mode: robot_node, whose plan it is): a new goal (waypoints).
 TRAJECTORY_GOAL = "feedforward/trajectory"
-#: robot mode, robot_node -> feedforward: the sample k it took from a driver's joint states,
-#: stamped ``kT`` (JointState: position, velocity), in place of the plant's ``joint_states``.
+#: robot mode, robot_node -> observers: the sample k it took from a driver's joint states,
+#: stamped ``kT`` (JointState: position, velocity): what the law measured.
 SAMPLE = "feedback/sample"
-#: ``header.frame_id`` of a robot-mode sample that (re)starts the plan (activation, a watchdog
-#: recovery, a goal aborted): the feedforward drops its plan and queued goals and holds the
-#: sample's position; the set point answering it carries the same ``frame_id``.
-START_FRAME = "apc/start"
 #: plant -> all: simulation time in lockstep mode (absolute: there is one clock per ROS graph).
 CLOCK = "/clock"
 #: every node -> monitors: loop timing, late/missing inputs, rejected messages, RLS health.

@@ -1,0 +1,46 @@
+"""A stand-in for robot mode's plan in synthetic-time tests of :class:`RobotLoop`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from apc_core.wire import TrajectoryGoal
+from apc_feedforward.goals import Sampled
+from apc_feedforward.nominal import Setpoint
+
+HOLD_U_N = 0.5  # the scripted plan's nominal torque on a hold
+
+
+class ScriptedPlan:
+    """A stand-in for the feedforward's plan (``GoalQueue``): the set points a test scripts by
+    sample, else a hold of the position measured at the first sample after a restart."""
+
+    def __init__(self) -> None:
+        self.setpoints: dict[int, Setpoint] = {}
+        self.queued: list[TrajectoryGoal] = []
+        self.hold: np.ndarray | None = None
+        self.restarts = 0
+        self.fail = False
+
+    def restart(self) -> int:
+        self.restarts += 1
+        self.setpoints.clear()
+        self.hold = None
+        dropped, self.queued = len(self.queued), []
+        return dropped
+
+    def add(self, goal: TrajectoryGoal) -> None:
+        if goal.times_s[-1] <= 0.0:
+            raise ValueError("points: a goal must take time")
+        self.queued.append(goal)
+
+    def sample(self, k, position, render) -> Sampled:
+        if self.fail:
+            return Sampled(failed=ValueError("the plan cannot be computed"))
+        sp = self.setpoints.get(k)
+        if sp is None:
+            if self.hold is None:
+                self.hold = position.copy()
+            n = position.size
+            sp = Setpoint(k, 0.0, self.hold, np.zeros(n), np.zeros(n), np.full(n, HOLD_U_N))
+        return Sampled(setpoint=sp, rendered=render(sp))
