@@ -8,7 +8,9 @@ varied inputs, per call in microseconds:
 - ``gain_us``           what ``AdaptiveFeedback`` does for Eq. 35: ``OneStepControl`` on the
                         identifier's Θᵀ view (preallocated, Cholesky solve)
 - ``feedback_step_us``  ``AdaptiveFeedback.update`` (RLS + gain + bookkeeping), the whole
-                        per-sample feedback
+                        per-sample feedback, with the paper's settings
+- ``recommended_step_us`` the same with the recommended preset (3-step receding horizon over
+                        the model with two input lags and the integral, the RLS over them)
 - ``rnea_us``           ``nominal_torque`` (Pinocchio RNEA + the finiteness check + copy),
                         the feedforward's per-sample cost; ``pin_rnea_us`` is the bare call
 - ``plant_period_us``   ``Plant.step``: one period T = 10 ms, 4 RK4 steps of ABA (the default);
@@ -159,6 +161,23 @@ def setup_arm(n: int) -> tuple[dict[str, Any], dict[str, Callable[[int], Any]]]:
 
     ops["feedback_step_us"] = feedback
 
+    # The recommended preset's step (what robot mode and the commands run by default).
+    from apc_feedback.presets import recommended_settings
+
+    recommended = AdaptiveFeedback(
+        model, AdaptiveConfig.from_dict({**recommended_settings(), "period": 0.01})
+    )
+    recommended.update(0, x.q[0], x.qd[0], x.q_d[0], x.qd_d[0], x.qdd_d[0], x.u_n[0], None)
+    recommended_sample = itertools.count(1)
+
+    def recommended_step(i: int) -> None:
+        k = next(recommended_sample)
+        recommended.update(
+            k, x.q[i], x.qd[i], x.q_d[i], x.qd_d[i], x.qdd_d[i], x.u_n[i], x.applied[i]
+        )
+
+    ops["recommended_step_us"] = recommended_step
+
     # RLS alone, on regressors like the law's.
     rls = law.rls
     dxs = [np.r_[x.q[i] - x.q_d[i], x.qd[i] - x.qd_d[i]] for i in range(k)]
@@ -287,7 +306,8 @@ def run(quick: bool = False, joints: Sequence[int] = JOINTS) -> dict[str, Any]:
         per_n[n][key] = {**benchlib.stats(1e6 * np.asarray(values), 3), "calls_per_rep": batch}
     for n in joints:
         benchlib.progress(
-            f"compute n={n}: feedback {per_n[n]['feedback_step_us']['median']:.1f} us, "
+            f"compute n={n}: feedback {per_n[n]['feedback_step_us']['median']:.1f} us "
+            f"(recommended preset {per_n[n]['recommended_step_us']['median']:.1f} us), "
             f"rnea {per_n[n]['rnea_us']['median']:.2f} us, plant period "
             f"{per_n[n]['plant_period_us']['median']:.0f} us"
         )

@@ -259,7 +259,9 @@ class RobotSampler:
                 self.velocity.reset()
             else:
                 self._intervals.append(stamp - newest.stamp_ns)
-                self.driver_period_ns = int(np.median(self._intervals))
+                ordered = sorted(self._intervals)  # 15 ints: a tenth of numpy.median's cost
+                n = len(ordered)
+                self.driver_period_ns = int((ordered[(n - 1) // 2] + ordered[n // 2]) / 2)
         velocity = self.velocity.update(stamp, state.position)
         self._acceleration = self.velocity.acceleration
         if state.velocity is not None:
