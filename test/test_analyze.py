@@ -49,6 +49,24 @@ def test_tip_lever_is_the_distance_from_each_axis_to_the_wrist():
     assert lever[2] == pytest.approx(np.hypot(0.4318, 0.0203), abs=1e-3)
 
 
+def test_a_recording_carries_the_arms_urdf_and_its_tip_without_a_stored_scenario(
+    recording, monkeypatch
+):
+    """The plant publishes its URDF on robot_description (transient local) and the recorder
+    keeps it: a recording made by the separate nodes, with no run description stored, still
+    gives the tip displacement, the same as with the scenario."""
+    from apc_plant_sim import recording as rec
+    from apc_plant_sim.recording import load_run
+
+    _, path = recording
+    assert load_run(path).robot_description.lstrip().startswith("<")
+    with_scenario = analyze_file(path)
+    monkeypatch.setattr(rec, "_custom_run", lambda path: {})  # as the separate nodes record
+    bare = analyze_file(path)
+    assert np.isfinite(bare["max_tip_mm"]).all()
+    assert bare["max_tip_mm"] == pytest.approx(with_scenario["max_tip_mm"], rel=1e-9)
+
+
 def test_cli_json_and_errors(recording, capsys, tmp_path):
     _, path = recording
     assert main(["--json", str(path)]) == 0

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from apc_core.nodeutil import resolve_config_path
+from apc_core.config_files import resolve_config_path
 from apc_core.params import ConfigError
 from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_payload
 from apc_feedback.laws import make_law

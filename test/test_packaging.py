@@ -31,7 +31,7 @@ VENV_BIN = VENV / "bin"
 EXECUTABLES: dict[str, tuple[str, ...]] = {
     "apc_core": ("recorder", "player", "bag_recover"),
     "apc_feedforward": ("feedforward_node",),
-    "apc_feedback": ("feedback_node",),
+    "apc_feedback": ("feedback_node", "robot_node"),
     "apc_plant_sim": ("plant_node", "robot_sim", "arm", "experiment", "analyze", "apc_params"),
 }
 #: One executable of each package, run to ``--help``.
@@ -39,6 +39,7 @@ HELP_RUNS = (
     ("apc_core", "recorder"),
     ("apc_feedforward", "feedforward_node"),
     ("apc_feedback", "feedback_node"),
+    ("apc_feedback", "robot_node"),
     ("apc_plant_sim", "plant_node"),
 )
 #: Installed into share/apc_core/config (relative to the repository's config/).
@@ -256,7 +257,7 @@ def test_config_resolved_through_install_share(workspace):
     """From a directory outside the repo, apc is imported from the install and its config
     files are found in share/apc_core/config of the install, not in the checkout."""
     probe = (
-        "import apc_core.nodeutil as u;"
+        "import apc_core.config_files as u;"
         "print(u.__file__);"
         f"print(u.resolve_config_path('puma560_3dof.urdf'));"
         f"print(u.resolve_config_path('{PARAMS_FILE}'))"
@@ -268,6 +269,33 @@ def test_config_resolved_through_install_share(workspace):
     config = workspace.share("apc_core") / "config"
     assert urdf == config / "puma560_3dof.urdf"
     assert params == config / PARAMS_FILE
+
+
+@pytest.mark.ros
+def test_experiment_runs_from_the_install_without_the_source_tree(workspace, ros_domain):
+    """``experiment --case a`` from a directory outside the checkout, with apc imported from
+    the install: the scenario's URDF and reference numbers come from share/apc_core/config
+    (a checkout's ``config/`` is not where an install looks), the run is recorded."""
+    probe = "import apc_plant_sim.scenario as s; print(s.__file__); print(s.CONFIG_DIR)"
+    proc = workspace.run(sys.executable, "-c", probe)
+    assert proc.returncode == 0, proc.stderr
+    module, config = (Path(line) for line in proc.stdout.split())
+    assert module.is_relative_to(workspace.install / "apc_plant_sim"), module
+    assert config == workspace.share("apc_core") / "config"
+    out = workspace.root / "runs"
+    run = workspace.run(
+        workspace.executable("apc_plant_sim", "experiment"),
+        "--case",
+        "a",
+        "--hold",
+        "0.1",
+        "--out",
+        out,
+        "--quiet",
+        timeout=180.0,
+    )
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert list(out.glob("*.mcap")), run.stdout[-2000:]
 
 
 def _wait_for_node(name: str, child: subprocess.Popen, timeout_s: float) -> bool:

@@ -184,9 +184,11 @@ def test_default_topics_leave_out_clock_and_diagnostics(recorded, ros):
         "/" + s.name for s in wire.TOPICS if s.name not in (wire.CLOCK, wire.DIAGNOSTICS)
     }
     assert spin_until(ctx, nodes, lambda: player.done, 5)
-    # The first sample of every recorded topic (the goal topic holds no message), and the set
-    # point and nominal torque of sample 1, which the feedforward sent ahead at sim time 0.
-    assert sum(player.published.values()) == 7
+    # The first sample of every recorded topic (the goal topic holds no message), the set
+    # point and nominal torque of sample 1, which the feedforward sent ahead at sim time 0,
+    # and the arm's URDF the plant published at its start (robot_description).
+    assert sum(player.published.values()) == 8
+    assert player.published["/" + wire.ROBOT_DESCRIPTION] == 1
 
 
 def test_rate_two_takes_half_the_wall_time(recorded, ros):

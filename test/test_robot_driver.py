@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_core.nodeutil import resolve_config_path
+from apc_core.config_files import resolve_config_path
 from apc_core.robot import Payload, load_robot, with_payload
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import PinocchioEngine

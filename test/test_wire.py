@@ -16,7 +16,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
@@ -68,7 +68,7 @@ def test_topic_names_are_relative_except_clock_and_diagnostics():
 
 def test_topic_table_has_every_topic_with_its_type_and_qos():
     table = {spec.name: spec for spec in wire.TOPICS}
-    assert len(table) == len(wire.TOPICS) == 9
+    assert len(table) == len(wire.TOPICS) == 10
     expected = {
         wire.JOINT_STATES: (JointState, wire.CONTROL_QOS),
         wire.SETPOINT: (JointTrajectory, wire.CONTROL_QOS),
@@ -77,6 +77,7 @@ def test_topic_table_has_every_topic_with_its_type_and_qos():
         wire.ESTIMATE: (Float64MultiArray, wire.CONTROL_QOS),
         wire.TRAJECTORY_GOAL: (JointTrajectory, wire.TRAJECTORY_GOAL_QOS),
         wire.SAMPLE: (JointState, wire.CONTROL_QOS),
+        wire.ROBOT_DESCRIPTION: (String, wire.ROBOT_DESCRIPTION_QOS),
         wire.CLOCK: (Clock, wire.CLOCK_QOS),
         wire.DIAGNOSTICS: (DiagnosticArray, wire.DIAGNOSTICS_QOS),
     }

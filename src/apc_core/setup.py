@@ -7,7 +7,7 @@ package_name = "apc_core"
 
 # config/ is a relative symlink to the repository's top-level config/ (URDFs, parameter files,
 # reference data); its files are installed as copies into share/apc_core/config, where
-# apc_core.nodeutil.resolve_config_path finds them through ament_index_python.
+# apc_core.config_files.resolve_config_path finds them through ament_index_python.
 _HERE = Path(__file__).resolve().parent
 
 

@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,24 +32,23 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
+from std_msgs.msg import String
 
+from apc_core import wire
+from apc_core.config_files import resolve_config_path
 from apc_core.defaults import derive
 from apc_core.params import ConfigError, Param
 from apc_core.robot import (
-    EXAMPLE_ROBOT_DATA,
     PAPER_GRAVITY_M_S2,
     PAPER_PERIOD_S,
     Robot,
     RobotModelError,
-    example_robot_urdf,
     load_robot,
     read_urdf,
     with_inertia_error,
 )
 from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
-
-#: Where ``config/`` is in a source checkout (src/apc_core/apc_core/ -> repo root).
-_REPO_CONFIG = Path(__file__).resolve().parents[3] / "config"
 
 ROBOT_PARAMS: tuple[Param, ...] = (
     Param(
@@ -93,40 +92,6 @@ CONTROLLER_ROBOT_PARAMS: tuple[Param, ...] = (
 )
 
 
-def config_dirs() -> list[Path]:
-    """Directories searched for config files: the ROS share dir, then the source checkout."""
-    dirs = []
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        dirs.append(Path(get_package_share_directory("apc_core")) / "config")
-    except Exception:  # no ament index (plain venv without AMENT_PREFIX_PATH)
-        pass
-    dirs.append(_REPO_CONFIG)
-    return dirs
-
-
-def resolve_config_path(name: str) -> Path:
-    """Find a config file by absolute path, path relative to the cwd, name in config dirs, or
-    ``example-robot-data/<path under its robots/>`` (a URDF of that wheel)."""
-    if name.startswith(EXAMPLE_ROBOT_DATA):
-        try:
-            return example_robot_urdf(name[len(EXAMPLE_ROBOT_DATA) :])
-        except FileNotFoundError:
-            return Path(name)
-    path = Path(os.path.expanduser(name))
-    if path.is_absolute() or path.exists():
-        return path
-    for base in config_dirs():
-        candidate = base / name
-        if candidate.exists():
-            return candidate
-        candidate = base / path.name
-        if candidate.exists():
-            return candidate
-    return path
-
-
 def robot_from_params(values: dict[str, Any]) -> Robot:
     """Load the arm named by :data:`ROBOT_PARAMS` values; errors name the parameter."""
     xml = values.get("robot_description", "")
@@ -141,6 +106,46 @@ def robot_from_params(values: dict[str, Any]) -> Robot:
     except RobotModelError as exc:
         param = "lock_joints" if str(exc).startswith("lock_joints") else source_param
         raise ConfigError(f"parameter '{param}': {exc}") from None
+
+
+@contextlib.contextmanager
+def node_logs_to(directory: Path) -> Iterator[None]:
+    """While inside, the log lines of nodes made in this process go to rcl's log file in
+    ``directory`` (``ROS_LOG_DIR``), not to the console: rclpy configures rcl's logging when
+    its first context comes and keeps that configuration while any context lives, so one
+    context made here with ``--disable-stdout-logs`` sets it for every context after it.
+    Without effect if a context already lives in the process (logging is configured then)."""
+    directory.mkdir(parents=True, exist_ok=True)
+    before = os.environ.get("ROS_LOG_DIR")
+    os.environ["ROS_LOG_DIR"] = str(directory)
+    context = rclpy.Context()
+    rclpy.init(args=["--ros-args", "--disable-stdout-logs"], context=context)
+    try:
+        yield
+    finally:
+        rclpy.try_shutdown(context=context)
+        if before is None:
+            os.environ.pop("ROS_LOG_DIR", None)
+        else:
+            os.environ["ROS_LOG_DIR"] = before
+
+
+def urdf_xml(values: dict[str, Any]) -> str:
+    """The URDF text :data:`ROBOT_PARAMS` values name (``robot_description``, else the file of
+    ``robot_description_path``); call after :func:`robot_from_params` accepted them."""
+    xml = values.get("robot_description", "")
+    if not xml:
+        xml, _ = read_urdf(resolve_config_path(values["robot_description_path"]))
+    return xml
+
+
+def publish_robot_description(node: Node, xml: str) -> Publisher:
+    """Publish the arm's URDF once on ``robot_description`` (transient local, as
+    robot_state_publisher does): a recorder or a viewer that comes later still gets it. Keep
+    the publisher: its history is what late joiners receive."""
+    publisher = node.create_publisher(String, wire.ROBOT_DESCRIPTION, wire.ROBOT_DESCRIPTION_QOS)
+    publisher.publish(String(data=xml))
+    return publisher
 
 
 def controller_robot_from_params(values: dict[str, Any]) -> Robot:
@@ -166,10 +171,7 @@ def fill_derived(values: dict[str, Any], robot: Robot, derived: Mapping[str, str
     empty = [name for name in derived if not values[name]]
     if not empty:
         return []
-    xml = values.get("robot_description", "")
-    if not xml:
-        xml, _ = read_urdf(resolve_config_path(values["robot_description_path"]))
-    defaults = derive(robot, xml)
+    defaults = derive(robot, urdf_xml(values))
     for name in empty:
         value = getattr(defaults, derived[name])
         values[name] = list(value) if isinstance(value, tuple) else value

@@ -339,12 +339,21 @@ EXAMPLE_ROBOT_DATA = "example-robot-data/"
 
 
 def example_robot_urdf(relative: str) -> Path:
-    """A URDF shipped by the ``example-robot-data`` wheel (installed under sys.prefix), by its
-    path under the wheel's ``robots/`` (``panda_description/urdf/panda.urdf``)."""
+    """A URDF shipped by ``example-robot-data``, by its path under the package's ``robots/``
+    (``panda_description/urdf/panda.urdf``): the PyPI wheel (installed under sys.prefix), else
+    the ROS package (``ros-jazzy-example-robot-data``, found through the ament index)."""
     hits = glob.glob(f"{sys.prefix}/**/example-robot-data/robots/{relative}", recursive=True)
-    if not hits:
-        raise FileNotFoundError(f"example-robot-data does not ship {relative} here")
-    return Path(hits[0])
+    if hits:
+        return Path(hits[0])
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        share = Path(get_package_share_directory("example-robot-data"))
+    except Exception:  # no ament index, or no such package in it
+        share = None
+    if share is not None and (share / "robots" / relative).is_file():
+        return share / "robots" / relative
+    raise FileNotFoundError(f"example-robot-data does not ship {relative} here")
 
 
 def alternating_error(n: int, magnitude: float = 0.1) -> np.ndarray:

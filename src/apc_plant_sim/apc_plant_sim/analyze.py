@@ -21,26 +21,32 @@ from typing import Any
 import numpy as np
 
 from apc_core.bag import BagError
-from apc_core.nodeutil import resolve_config_path
+from apc_core.config_files import resolve_config_path
 from apc_core.robot import Robot, RobotModelError, load_robot
 from apc_plant_sim.metrics import compute_metrics
 from apc_plant_sim.recording import RecordedRun, load_run
 
 
 def robot_of(run: RecordedRun) -> Robot | None:
-    """The arm of a recording's stored scenario (for the tip metric); None without one."""
+    """The arm of a recording (for the tip metric): its stored scenario's, else the URDF it
+    recorded on ``robot_description`` with every joint it did not record locked (a gripper);
+    None without either. The tip metric is kinematics: gravity does not enter it."""
     scenario = run.run.get("scenario", {})
     urdf = scenario.get("urdf")
-    if not urdf:
-        return None
     try:
-        return load_robot(
-            resolve_config_path(urdf),
-            gravity=scenario.get("gravity", 9.8062),
-            lock_joints=tuple(scenario.get("lock_joints", ())),
-        )
+        if urdf:
+            return load_robot(
+                resolve_config_path(urdf),
+                gravity=scenario.get("gravity", 9.8062),
+                lock_joints=tuple(scenario.get("lock_joints", ())),
+            )
+        if run.robot_description:
+            every = load_robot(run.robot_description).joint_names
+            others = tuple(j for j in every if j not in run.joint_names)
+            return load_robot(run.robot_description, lock_joints=others)
     except RobotModelError:
         return None
+    return None
 
 
 def analyze_file(path: str | Path) -> dict[str, Any]:

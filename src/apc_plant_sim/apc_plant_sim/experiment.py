@@ -189,15 +189,22 @@ def overrides(values: Mapping[str, Any]) -> list[Parameter]:
 
 
 class Progress:
-    """A one-line progress bar on stderr, drawn only when stderr is a terminal."""
+    """Progress on stderr: a one-line bar on a terminal, else one line per named step (a log
+    or CI keeps one line per run, not a bar's redraws)."""
 
     def __init__(self, total: int, label: str, enabled: bool = True) -> None:
         self.total, self.label = max(total, 1), label
-        self.enabled = enabled and sys.stderr.isatty()
+        self.tty = sys.stderr.isatty()
+        self.enabled = enabled
         self._last = -1
 
-    def update(self, k: int) -> None:
+    def update(self, k: int, name: str = "") -> None:
+        """Step ``k`` (of ``total``) starts; ``name`` says what it is."""
         if not self.enabled:
+            return
+        if not self.tty:
+            if name:
+                print(f"{self.label} {k + 1}/{self.total}: {name}", file=sys.stderr, flush=True)
             return
         pct = min(100, int(100 * k / self.total))
         if pct != self._last:
@@ -207,7 +214,7 @@ class Progress:
             self._last = pct
 
     def close(self) -> None:
-        if self.enabled:
+        if self.enabled and self.tty:
             sys.stderr.write("\n")
 
 

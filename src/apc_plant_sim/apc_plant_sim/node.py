@@ -49,9 +49,11 @@ from apc_core.nodeutil import (
     Stopwatch,
     fill_derived,
     guarded,
+    publish_robot_description,
     reject,
     robot_from_params,
     run_node,
+    urdf_xml,
 )
 from apc_core.params import ConfigError, Param, declare
 from apc_plant_sim.intake import WATCHDOG_PARAMS, Action, Filed, Source, TorqueIntake
@@ -126,6 +128,7 @@ class PlantNode(Node):
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
 
         self.js_pub = self.create_publisher(JointState, wire.JOINT_STATES, qos)
+        self.description_pub = publish_robot_description(self, urdf_xml(values))
         self.clock_pub = (
             self.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
             if values["publish_clock"]

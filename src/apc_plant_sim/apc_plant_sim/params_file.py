@@ -26,8 +26,9 @@ from typing import Any
 
 import yaml
 
+from apc_core.config_files import resolve_config_path
 from apc_core.defaults import DERIVATION, ArmDefaults, load
-from apc_core.nodeutil import ROBOT_PARAMS, resolve_config_path
+from apc_core.nodeutil import ROBOT_PARAMS
 from apc_core.params import Param
 from apc_core.robot import RobotModelError
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS

@@ -40,6 +40,8 @@ class RecordedRun:
         Θᵀ = ``[F̂ Ĝ ŵ]`` per sample.
     run : dict
         The experiment description stored in the file (``custom_data['apc.run']``), if any.
+    robot_description : str
+        The arm's URDF as recorded on ``robot_description`` ("" if none was).
     """
 
     path: Path
@@ -57,6 +59,7 @@ class RecordedRun:
     residual_norm: np.ndarray
     theta_t: np.ndarray | None
     run: dict[str, Any] = field(default_factory=dict)
+    robot_description: str = ""
 
     @property
     def error(self) -> np.ndarray:
@@ -72,7 +75,13 @@ class RecordedRun:
         return len(self.t) - 1
 
 
-_TOPICS = (wire.JOINT_STATES, wire.SETPOINT, wire.FEEDBACK_TORQUE, wire.ESTIMATE)
+_TOPICS = (
+    wire.JOINT_STATES,
+    wire.SETPOINT,
+    wire.FEEDBACK_TORQUE,
+    wire.ESTIMATE,
+    wire.ROBOT_DESCRIPTION,
+)
 
 
 def _custom_run(path: Path) -> dict[str, Any]:
@@ -91,6 +100,7 @@ def load_run(path: str | Path) -> RecordedRun:
     feedback: dict[int, Any] = {}
     estimates: dict[int, Any] = {}
     names: tuple[str, ...] | None = None
+    description = ""
     for m in read_messages(path):
         # Recorded names are resolved (``/joint_states``, ``/puma/joint_states`` ...).
         tail = next((t for t in _TOPICS if m.topic.endswith("/" + t)), None)
@@ -107,6 +117,8 @@ def load_run(path: str | Path) -> RecordedRun:
         elif tail == wire.ESTIMATE:
             est = wire.msg_to_estimate(m.decode())
             estimates[est.stamp_ns] = est
+        elif tail == wire.ROBOT_DESCRIPTION:
+            description = m.decode().data
     if names is None:
         raise ValueError(f"{path}: no joint_states recorded")
     stamps = sorted(states)
@@ -151,6 +163,7 @@ def load_run(path: str | Path) -> RecordedRun:
         residual_norm=residual,
         theta_t=theta_t,
         run=run,
+        robot_description=description,
     )
 
 
@@ -174,6 +187,7 @@ def load_robot_run(path: str | Path) -> RecordedRun:
     setpoints: dict[int, Any] = {}
     driver: list[tuple[int, Any]] = []
     names: tuple[str, ...] | None = None
+    description = ""
     for m in read_messages(path):
         if m.topic.endswith("/" + wire.SAMPLE):
             msg = m.decode()
@@ -185,6 +199,8 @@ def load_robot_run(path: str | Path) -> RecordedRun:
         elif m.topic.endswith("/" + wire.JOINT_STATES):
             msg = m.decode()
             driver.append((wire.stamp_to_ns(msg.header.stamp), msg))
+        elif m.topic.endswith("/" + wire.ROBOT_DESCRIPTION):
+            description = m.decode().data
     if names is None:
         raise ValueError(f"{path}: no {wire.SAMPLE} recorded (not a robot-mode run)")
     stamps = sorted(samples)
@@ -231,4 +247,5 @@ def load_robot_run(path: str | Path) -> RecordedRun:
         residual_norm=np.full(rows - start, np.nan),
         theta_t=None,
         run={**run, "move_start_s": stamps[start] / wire.NS_PER_S, "hold_max_error_deg": hold_max},
+        robot_description=description,
     )

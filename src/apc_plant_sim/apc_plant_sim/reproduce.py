@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from apc_core.nodeutil import node_logs_to
 from apc_core.robot import example_robot_urdf
 from apc_plant_sim import robot_compare
 from apc_plant_sim.analyze import analyze_file
@@ -139,7 +140,7 @@ def execute(planned: Sequence[Planned], out: Path, progress: bool = True) -> dic
     outcomes: dict[str, Any] = {}
     bar = Progress(len(planned), "make run", progress)
     for i, p in enumerate(planned):
-        bar.update(i)
+        bar.update(i, p.spec.name)
         outcome = run_in_process(p.spec, out, progress=False, timeout_s=300)
         outcomes[p.spec.name] = {
             "ok": outcome.ok,
@@ -349,9 +350,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     planned = plan(args.quick, only)
-    outcomes = execute(planned, out, progress=not args.quiet)
     robot_cases = robot_compare.plan(args.quick) if "robot" in only else []
-    robot_results = robot_compare.execute(robot_cases, out, progress=not args.quiet)
+    with node_logs_to(out / "logs"):  # the nodes' log lines: a file there, not the console
+        outcomes = execute(planned, out, progress=not args.quiet)
+        robot_results = robot_compare.execute(robot_cases, out, progress=not args.quiet)
     metrics = {
         p.spec.name: analyze_file(outcomes[p.spec.name]["path"])
         for p in planned

@@ -442,7 +442,7 @@ def execute(
     results: dict[str, dict[str, Any]] = {}
     bar = Progress(len(cases), "robot comparison", progress)
     for i, case in enumerate(cases):
-        bar.update(i)
+        bar.update(i, case.name)
         outcome = run_case(case, out)
         entry: dict[str, Any] = {
             "ok": outcome.ok,

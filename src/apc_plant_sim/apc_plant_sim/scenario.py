@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from apc_core.config_files import config_dir
 from apc_core.defaults import load as load_defaults
 from apc_core.robot import (
     PAPER_GRAVITY_M_S2,
@@ -46,9 +47,8 @@ from apc_plant_sim.effects import ArmEffects, PhysicalArm
 from apc_plant_sim.offline import RunResult, run_closed_loop
 from apc_plant_sim.plant import Plant, PlantConfig
 
-#: Repository root when running from a checkout (config/ lives there).
-REPO_ROOT = Path(__file__).resolve().parents[3]
-CONFIG_DIR = REPO_ROOT / "config"
+#: apc's config directory: ``share/apc_core/config`` in a ROS install, else the checkout's.
+CONFIG_DIR = config_dir()
 PUMA_3DOF_URDF = CONFIG_DIR / "puma560_3dof.urdf"
 PAPER_JOINT_SIGN = np.array([1.0, -1.0, -1.0])
 PAPER_CASES = {"a": 0.0, "b": PAPER_MAX_PAYLOAD_KG / 2.0, "c": PAPER_MAX_PAYLOAD_KG}

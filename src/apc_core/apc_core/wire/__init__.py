@@ -24,6 +24,7 @@ Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and 
 - ``TRAJECTORY_GOAL``: ``trajectory_msgs/JointTrajectory``, :data:`TRAJECTORY_GOAL_QOS`
 - ``SAMPLE`` (robot mode, for observers): ``sensor_msgs/JointState`` (position, velocity),
   :data:`CONTROL_QOS`
+- ``ROBOT_DESCRIPTION``: ``std_msgs/String`` (URDF XML), :data:`ROBOT_DESCRIPTION_QOS`
 - ``CLOCK`` (absolute): ``rosgraph_msgs/Clock``, :data:`CLOCK_QOS`
 - ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
 
@@ -89,6 +90,8 @@ from apc_core.wire.topics import (
     FEEDFORWARD_TORQUE,
     JOINT_STATES,
     MAX_LOOKAHEAD,
+    ROBOT_DESCRIPTION,
+    ROBOT_DESCRIPTION_QOS,
     SAMPLE,
     SETPOINT,
     TOPICS,
@@ -115,6 +118,8 @@ __all__ = [
     "JOINT_STATE_FIELDS",
     "MAX_LOOKAHEAD",
     "NS_PER_S",
+    "ROBOT_DESCRIPTION",
+    "ROBOT_DESCRIPTION_QOS",
     "SAMPLE",
     "SETPOINT",
     "TOPICS",

@@ -12,7 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory
 
 #: plant -> all: ``q``, ``q̇`` at sample k; ``effort`` = torque applied over the period ending at k.
@@ -31,6 +31,9 @@ TRAJECTORY_GOAL = "feedforward/trajectory"
 #: robot mode, robot_node -> observers: the sample k it took from a driver's joint states,
 #: stamped ``kT`` (JointState: position, velocity): what the law measured.
 SAMPLE = "feedback/sample"
+#: plant -> recorder, viewers: the arm's URDF (``std_msgs/String``), as robot_state_publisher
+#: publishes it, so a recording explains itself (its joints' kinematics, a viewer's model).
+ROBOT_DESCRIPTION = "robot_description"
 #: plant -> all: simulation time in lockstep mode (absolute: there is one clock per ROS graph).
 CLOCK = "/clock"
 #: every node -> monitors: loop timing, late/missing inputs, rejected messages, RLS health.
@@ -70,6 +73,14 @@ TRAJECTORY_GOAL_QOS = QoSProfile(
     depth=10,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
+)
+#: ``robot_description``: RELIABLE, KEEP_LAST 1, TRANSIENT_LOCAL, what robot_state_publisher
+#: offers: a node or a recorder that starts later still gets the arm's description.
+ROBOT_DESCRIPTION_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 #: ``/diagnostics``: the ROS default profile (RELIABLE, KEEP_LAST 10, VOLATILE), what
 #: ``diagnostic_updater`` and ``diagnostic_aggregator`` use, so standard tools match.
@@ -115,6 +126,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec(ESTIMATE, Float64MultiArray, CONTROL_QOS),
     TopicSpec(TRAJECTORY_GOAL, JointTrajectory, TRAJECTORY_GOAL_QOS),
     TopicSpec(SAMPLE, JointState, CONTROL_QOS),
+    TopicSpec(ROBOT_DESCRIPTION, String, ROBOT_DESCRIPTION_QOS),
     TopicSpec(CLOCK, Clock, CLOCK_QOS),
     TopicSpec(DIAGNOSTICS, DiagnosticArray, DIAGNOSTICS_QOS),
 )

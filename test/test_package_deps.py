@@ -1,0 +1,98 @@
+"""Every package's ``package.xml`` declares what its code imports, by its rosdep key.
+
+rosdep installs what ``package.xml`` lists; a module imported but not declared is a broken
+install on a machine that has only what rosdep gave it. Keys are rosdistro's (ROS packages by
+name, ``python3-*`` for Python packages with an apt package) or, for what has none, the pip keys
+of ``rosdep/apc.yaml``, which is checked to define them.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("apc_core", "apc_feedforward", "apc_feedback", "apc_plant_sim")
+#: Imported module -> rosdep key (the module's own name when it is a ROS package).
+KEYS = {
+    "numpy": "python3-numpy",
+    "scipy": "python3-scipy",
+    "yaml": "python3-yaml",
+    "matplotlib": "python3-matplotlib",
+    "pinocchio": "pinocchio",
+    "mcap": "python3-mcap-pip",
+    "zstandard": "python3-zstandard-pip",
+    "mujoco": "python3-mujoco-pip",
+}
+#: ROS packages imported by name (their rosdep key is the package name).
+ROS_PACKAGES = {
+    "rclpy",
+    "ament_index_python",
+    "builtin_interfaces",
+    "diagnostic_msgs",
+    "lifecycle_msgs",
+    "rcl_interfaces",
+    "rosgraph_msgs",
+    "sensor_msgs",
+    "std_msgs",
+    "trajectory_msgs",
+}
+#: Imported indirectly: rclpy.lifecycle needs lifecycle_msgs.
+IMPLIED = {"rclpy.lifecycle": "lifecycle_msgs"}
+
+
+def _imports(package: str) -> set[str]:
+    """Top-level modules (and the implied ones) imported anywhere in ``package``'s code."""
+    found: set[str] = set()
+    for path in (REPO / "src" / package / package).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            for name in names:
+                found.add(name.split(".")[0])
+                found |= {IMPLIED[name]} if name in IMPLIED else set()
+    return found
+
+
+def _declared(package: str) -> set[str]:
+    root = ET.parse(REPO / "src" / package / "package.xml").getroot()
+    return {e.text for tag in ("depend", "exec_depend") for e in root.iter(tag) if e.text}
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_package_xml_declares_every_import(package):
+    needed = set()
+    for module in _imports(package) - set(sys.stdlib_module_names) - {package}:
+        if module in KEYS:
+            needed.add(KEYS[module])
+        elif module in ROS_PACKAGES or module in PACKAGES:
+            needed.add(module)
+        else:
+            pytest.fail(f"{package} imports {module!r}: give it a rosdep key in this test")
+    missing = needed - _declared(package)
+    assert not missing, f"{package}/package.xml lacks {sorted(missing)}"
+
+
+def test_the_pip_keys_are_defined_for_rosdep():
+    defined = yaml.safe_load((REPO / "rosdep" / "apc.yaml").read_text())
+    used = {k for p in PACKAGES for k in _declared(p) if k.endswith("-pip")}
+    assert used <= set(defined)
+    for key in used:
+        assert set(defined[key]) == {"debian", "ubuntu"}, key
+
+
+def test_dependencies_point_one_way():
+    """apc_core needs no other apc package; the feedforward needs no feedback; neither
+    controller needs the plant."""
+    assert not _declared("apc_core") & set(PACKAGES)
+    assert "apc_feedback" not in _declared("apc_feedforward")
+    for controller in ("apc_feedforward", "apc_feedback"):
+        assert "apc_plant_sim" not in _declared(controller) | _imports(controller)
