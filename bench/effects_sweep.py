@@ -121,7 +121,7 @@ def main() -> None:
 
 def summary(effects: dict) -> str:
     """Per effect: each law's worst joint over the cases (max / final, deg) and the cases
-    in which each adaptive column beats both baselines (README's table)."""
+    in which each adaptive column beats both baselines (docs/paper.md's table)."""
     lines = [
         f"| effect | {' | '.join(LAWS)} | wins recommended · fixed |",
         "|---|" + "---|" * (len(LAWS) + 1),

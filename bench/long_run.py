@@ -68,7 +68,7 @@ CONFIGS: dict[str, dict[str, Any]] = {
     # the same two with a position-weighted Q (bench/trace_guard.py), which holds a payload
     "guarded_qpos": {"q_position": 1e3},
     "paper_qpos": dict(paper_settings(), q_position=1e3),
-    # the measured fix within the paper's structure (README, bench/preset_sweep.py)
+    # the measured fix within the paper's structure (docs/paper.md, bench/preset_sweep.py)
     "recommended": recommended_settings(),
 }
 

@@ -59,7 +59,7 @@ LAYOUTS: dict[str, float] = {"robot_node": 0.0, "late_phase": 0.6e-3}
 #: 1 ms (``test_robot_loop``'s periods test, simulated time).
 CONTROLLER = "adaptive"
 
-#: robot_sim's side: the README's "Running on a robot" example at 1 kHz in wall time.
+#: robot_sim's side: docs/robot.md's "Running on a robot" example at 1 kHz in wall time.
 ROBOT_SIM_PARAMS: dict[str, Any] = {
     "robot_description_path": "puma560_3dof.urdf",
     "engine": "pinocchio",

@@ -1,8 +1,8 @@
-"""Every parameter override the README shows beside a parameter file takes effect.
+"""Every parameter override the README and docs/ show beside a parameter file takes effect.
 
 ROS applies a plain ``-p name:=value`` to every node (``/**``), and a node's own section in a
 parameter file wins over it, so an override the README documents can be silently lost. Each
-command in the README's shell blocks that gives ``--params-file`` and ``-p`` is started here as
+command in their shell blocks that gives ``--params-file`` and ``-p`` is started here as
 written (its nodes built in-process with exactly its ``--ros-args``, from the repository root),
 and every override is read back from the node it names, or from each node of the executable
 that declares it.
@@ -55,10 +55,10 @@ EXECUTABLE_NODES: dict[str, tuple[str, ...]] = {
 }
 
 
-def documented_overrides(readme: Path = REPO / "README.md") -> list[tuple[str, list[str]]]:
-    """(executable, its ``--ros-args``) of each README shell command with a parameter file and
-    a ``-p`` override."""
-    text = readme.read_text()
+def documented_overrides() -> list[tuple[str, list[str]]]:
+    """(executable, its ``--ros-args``) of each shell command of the README and docs/ with a
+    parameter file and a ``-p`` override."""
+    text = "\n".join(p.read_text() for p in (REPO / "README.md", *sorted(REPO.glob("docs/*.md"))))
     commands = []
     for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
         for line in block.replace("\\\n", " ").splitlines():

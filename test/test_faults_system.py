@@ -2,8 +2,8 @@
 
 Every node here runs as its own process (``sys.executable -m <package>.<module>``), as on a
 robot; an in-test rclpy node (:class:`Observer`) watches ``joint_states``, the torques and
-``/diagnostics``. Times measured here are printed (``pytest -s``) and quoted in the README's
-"Reliability" section; what is asserted are the documented bounds plus a scheduling margin.
+``/diagnostics``. Times measured here are printed (``pytest -s``) and quoted in
+docs/reliability.md; what is asserted are the documented bounds plus a scheduling margin.
 
 - a feedback node that dies (SIGKILL) in real time: the plant applies the nominal torque
   alone and reports a warning; a feedforward node that dies: the plant brakes within the
@@ -63,7 +63,7 @@ SCHEDULING_MARGIN_S = 0.15
 
 
 def report(what: str, **values: object) -> None:
-    """Print a measurement (shown with ``pytest -s``; quoted in the README)."""
+    """Print a measurement (shown with ``pytest -s``; quoted in docs/reliability.md)."""
     text = ", ".join(
         f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items()
     )
@@ -998,7 +998,7 @@ def test_network_namespaces_with_delay_and_loss(tmp_path):
     within 2x of the lossless offline loop's maximum error; lockstep completes (reliable QoS)
     and still equals the offline loop bit for bit.
 
-    Deployment settings for the lossy link (README, "Reliability"): the FastDDS profile
+    Deployment settings for the lossy link (docs/reliability.md): the FastDDS profile
     :data:`FASTDDS_LOSSY_LINK_PROFILE` and ``watchdog_s`` = :data:`NETWORK_WATCHDOG_S`. A real-time
     run on a shared 2-core machine also depends on the machine's load: a run that misses the
     bound is repeated once, and both are reported.

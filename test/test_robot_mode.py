@@ -49,8 +49,8 @@ GOAL_DEG = [90.0, 45.0, -135.0]
 COMMANDS = "/effort_controller/commands"
 SUBSTEP = 0.0005
 #: Simulated time runs at a fifth of real time: the adaptive law tolerates ~3 ms from a
-#: measurement to its torque (README "Running on a robot"), and on a loaded 2-core machine the
-#: wall-clock latencies of two DDS hops reach that; slowed down, the test is about the
+#: measurement to its torque (docs/robot.md, "Running on a robot"), and on a loaded 2-core
+#: machine the wall-clock latencies of two DDS hops reach that; slowed down, the test is about the
 #: controller, not about the machine.
 TIME_SCALE = 0.2
 T_NS = 10_000_000  # the preset's period

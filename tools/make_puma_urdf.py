@@ -16,7 +16,7 @@ Standard DH: ``T(i-1 -> i) = Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``. A URDF joint
 
 Each DH frame i also appears as a fixed frame ``dh_frame_i`` so tests (and users) can check the
 forward kinematics against the DH table. Joint angles are therefore the standard-DH angles of the
-reference; the paper's angles map onto them as (q1, -q2, -q3) (see README, "Angles").
+reference; the paper's angles map onto them as (q1, -q2, -q3) (see docs/model.md, "Angles").
 
 The three-joint arm lumps links 4-6 (0.82 + 0.34 + 0.09 = 1.25 kg) as a point mass at the wrist
 centre, a fixed link ``wrist_center`` at (0, 0, d4) in DH frame 3. The six-joint arm has the full
@@ -24,7 +24,8 @@ wrist; its ``wrist_center`` frame coincides with DH frames 4-6 (a4 = a5 = a6 = d
 
 Joint effort limits: the reference gives none. These are the values commonly quoted for the
 PUMA 560 (97.6, 186.4, 89.4, 24.2, 20.1, 21.3 N m), without a primary source to check them
-against; the paper's experiment stays well below them (README reports the measured peak ratio).
+against; the paper's experiment stays well below them (docs/paper.md reports the measured
+peak ratio).
 Velocity limits likewise are not in the source; 4 rad/s (joints 1-3) and 8 rad/s (wrist) are
 bounds above anything the experiments command, not properties of the arm.
 

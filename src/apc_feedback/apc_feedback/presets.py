@@ -49,7 +49,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     moves them as far as ``alpha_model |δu|²`` against 1 allows (inputs of ~30 N m, a move or a
     payload, count; a hold's little). With ``alpha`` everywhere one command applied 4 ms late
     on a hold lets the arm diverge, and robot mode starts every activation with a hold.
-    Chosen by measurement (README "The model prior"): 1e-4 is as robust but tracks the Panda
+    Chosen by measurement (docs/paper.md, "The model prior"): 1e-4 is as robust but tracks the Panda
     twice as badly, 1e-2 tracks best and diverges when ten commands in a row come 6 ms late.
     """
     return {

@@ -56,7 +56,7 @@ samples are the driver's states and the command leaves in the state's callback, 
 computed from a state is applied one driver period (plus the command's trip) after it, the
 same delay at every sample and in every run. Eq. 16 has no such delay; a law that models it
 (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start and learns the
-rest (README, "A robot's clock", for what each driver rate measures).
+rest (docs/robot.md, "A robot's clock", for what each driver rate measures).
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ Defaults, measured with robot mode's loop closed offline (``apc_plant_sim.robot_
 - saturation: lost arms clip every sample from the 5th-7th: 5 samples.
 
 The fallback: computed torque, the one law bounded on every arm of the robot comparison (the
-README's "Through the robot interface": the tuned PID oscillates on the Panda, 86 deg), with
+docs/paper.md, "Through the robot interface": the tuned PID oscillates on the Panda, 86 deg), with
 ``Kp = 900``, ``Kv = 60`` (a double pole at -30 rad/s): with the paper's 100 / 20 it holds the
 PUMA 16.5 deg off under the payload it does not know, with 900 / 60 1.7 deg, with 2500 / 100
 the 10 ms driver's lag costs 4.7 deg. Supervised, every lost run above stays within 3.1 deg

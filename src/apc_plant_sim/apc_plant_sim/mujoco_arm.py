@@ -26,7 +26,7 @@ by apc's URDF) has two such bodies:
   about every axis as the arm moves, so no correction is invisible; the smallest one (in the
   Frobenius norm of the inertia tensor) moves the three moments by ``(+d, +d, -d)`` with
   ``d = (C - A - B) / 3`` = 0.00245 kg m^2 along the principal axes. What that changes in M(q)
-  and in the bias forces is measured in ``test_mujoco_arm.py`` and stated in the README.
+  and in the bias forces is measured in ``test_mujoco_arm.py`` and stated in docs/robot.md.
 
 :func:`physical_inertias` returns the corrected Pinocchio model and what it changed, so the
 MuJoCo arm and a Pinocchio arm can be compared with the same inertias.
