@@ -140,10 +140,8 @@ class AdaptiveConfig:
         Wind-up guard, an upper bound on ``trace(P)``. ``0`` (default) means
         ``trace(P(0))``: never less certain than at the start (with ``alpha_model``, each
         block of ``P`` within its own trace at ``P(0)``). A negative value
-        disables the guard (the paper's RLS). Measured in ``bench/trace_guard.py``: without it
-        a 20 s hold winds ``trace(P)`` up to 1e20-1e45, the identifier's updates become
-        unusable (P loses definiteness) and with a position-weighted Q the arm diverges; with
-        it nothing is rejected and errors during the move are equal or smaller.
+        disables the guard (the paper's RLS). Without it a long hold winds ``trace(P)`` up
+        until ``P`` loses definiteness (``bench/trace_guard.py``; docs/model.md).
     control_form : {"exact", "printed"}
         Eq. 35: exact minimiser ``-(R + GᵀQG)⁻¹GᵀQ(F x + w)`` or as printed
         ``-(R + GᵀQG)⁻¹GᵀQF(x + w)``.
@@ -166,7 +164,7 @@ class AdaptiveConfig:
         (``≈ T (D(q)⁻¹)_ii``, positive for any arm) non-positive: a projection onto physically
         possible models. Without it a sudden load (a payload picked up) lets one
         large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
-        torque (19 deg on joint 3 in the pickup run). Off in the paper.
+        torque (docs/paper.md, the pickup run). Off in the paper.
     input_lags : {0, 1, 2}
         Delayed inputs the identified model carries: ``δx(k+1) = F δx(k) + G₀ δu(k) + G₁
         δu(k-1) + … + G_L δu(k-L) + w``, the exact zero-order-hold model of an input applied
@@ -185,8 +183,7 @@ class AdaptiveConfig:
         1 (default): every ``Ĝ_j`` identified alike, the split learnt (robot mode, which knows
         the delay only to a driver period); small: the split held where ``input_delay`` puts
         it and only the total learnt (a delay known exactly; closed-loop data let the lags
-        trade effect between them: the offline PUMA with every effect on diverges in case (c)
-        with 1, tracks within 1.7 deg with 1e-6).
+        trade effect between them: docs/paper.md, "What a physical arm adds").
     identify_min_speed : float
         No identification step while a joint's measured speed is below this at ``k-1`` or
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which

@@ -47,10 +47,9 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     picked up mid-motion otherwise flips Ĝ and the law saturates). ``alpha`` is ``P(0)`` of ŵ
     alone: F̂ and Ĝ start from Eq. 33 with ``P(0) = 1e-3`` (``alpha_model``), so a sample
     moves them as far as ``alpha_model |δu|²`` against 1 allows (inputs of ~30 N m, a move or a
-    payload, count; a hold's little). With ``alpha`` everywhere one command applied 4 ms late
-    on a hold lets the arm diverge, and robot mode starts every activation with a hold.
-    Chosen by measurement (docs/paper.md, "The model prior"): 1e-4 is as robust but tracks the Panda
-    twice as badly, 1e-2 tracks best and diverges when ten commands in a row come 6 ms late.
+    payload, count; a hold's little): a late command on a hold, which robot mode starts every
+    activation with, must not move the model. Why these values and not others, measured:
+    docs/paper.md, "The model prior" and the preset sweep.
     """
     return {
         **paper_settings(alpha),
@@ -71,11 +70,9 @@ def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     seen through a velocity differenced over one period (half a period more), so ``Ĝ(0)`` is
     split by 1.5 T and held there (``split_prior``: the delay is known, only the total input
     gain is learnt). The offline stand-in for what robot mode measures (it splits ``Ĝ(0)`` by
-    the driver period it sees and learns the split). On the 3-joint PUMA 560 with all of
-    ``apc_plant_sim.effects.puma560_effects`` on (friction, armature, quantisation, the
-    differenced velocity, the delay), cases (a)-(c): within 2.6 deg max and 0.31 deg final
-    with the split held at T, 1.5 T or 2 T but (c) at 2 T (6.2 deg); with the split learnt
-    freely one of the cases diverges at each of them (``bench/effects_sweep.py``).
+    the driver period it sees and learns the split). The split is held because, learnt from
+    closed-loop data, the lags trade effect between them (``bench/effects_sweep.py``; the
+    figures are in docs/paper.md, "What a physical arm adds").
     """
     return {**recommended_settings(alpha), "input_delay": 1.5 * PAPER_PERIOD_S, "split_prior": 1e-6}
 

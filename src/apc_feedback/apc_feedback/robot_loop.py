@@ -413,9 +413,8 @@ class RobotLoop:
         such as a PID's integral, current). The adaptive law, reset when the fallback takes
         over, is idle while the fallback commands: its first sample at the hand-back starts it
         from Eq. 33 there. Identifying from the fallback's hold instead (its applied torques)
-        made the law re-trip within 4 samples of every hand-back (``apc_plant_sim.robot_offline``,
-        G forced wrong on a clean hold: 5.8 deg and three hand-overs against 1.8 deg, one
-        hand-over and 0.000 deg final error after the hand-back).
+        made the law re-trip within a few samples of every hand-back
+        (``apc_plant_sim.robot_offline``, G forced wrong on a clean hold).
         """
         supervisor, k = self.supervisor, args[0]
         error, error_qd = args[1] - args[3], args[2] - args[4]

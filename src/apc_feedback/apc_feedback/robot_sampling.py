@@ -42,10 +42,8 @@ a window of 0: the last three states). What it costs: no lag for a constant acce
 error grows with the jerk j, about ``j a b / 6`` for states ``a`` and ``b`` seconds back), where
 a two-point backward difference lags by half its span; and noise: evenly spaced over a span
 ``w``, position noise ``sigma`` becomes ``sqrt(26) sigma / w`` of velocity noise (the two-point
-difference: ``sqrt(2) sigma / w``), an encoder count ``c`` a velocity step up to ``4 c / w``.
-Measured on the adaptive law holding the PUMA with its payload, 1 kHz driver
-(``test/test_robot_loop.py``'s loop): a two-point difference over 5 ms lets it diverge, the
-parabola holds over 1 ms (window 0) and 10 ms; quantised positions need the drive's velocity.
+difference: ``sqrt(2) sigma / w``), an encoder count ``c`` a velocity step up to ``4 c / w``,
+so quantised positions need the drive's own velocity (docs/robot.md has what each measured).
 """
 
 from __future__ import annotations

@@ -10,11 +10,10 @@ applies to all, and topics, QoS and ``ros2 param`` are those of the separate exe
 is commanded by one node, ``robot_node`` (:mod:`apc_feedback.robot_node`), which samples the
 feedforward's plan itself.
 
-Why: a message between processes costs ~100-150 us of CPU on each side (DDS, a thread wake-up
-per message), one between nodes of a process ~20 us (``bench/ros_loop.py``). Composition is
-ROS 2's own answer (component containers). Measured on 2 cores: 10 arms at 100 Hz, one
-process each: no late sample; three processes each (30 processes): the machine runs out of
-CPU. Numbers of a lockstep run are the same bit for bit either way.
+Why: a message between processes costs a DDS hop and a thread wake-up on each side, one
+between nodes of a process much less (``bench/ros_loop.py`` and ``bench/multi_arm.py``
+measure both; docs/performance.md has the figures). Composition is ROS 2's own answer
+(component containers). Numbers of a lockstep run are the same bit for bit either way.
 """
 
 from __future__ import annotations
