@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 
+from apc_core.robot import PAPER_GOAL_DEG
 from apc_plant_sim.robot_offline import Latency, run_robot_loop
 from apc_plant_sim.scenario import recommended_settings
 
@@ -39,7 +40,7 @@ PHASES_MS = (0.0, 0.3)
 SEEDS = (0, 1, 2)
 DRIVER_HZ = (1000, 500, 400, 333, 250, 200, 100)
 DELAYS_MS = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0)
-GOAL_DEG = (90.0, 45.0, -135.0)
+GOAL_DEG = PAPER_GOAL_DEG
 
 
 def settings(alpha_model: float) -> dict:

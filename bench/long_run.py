@@ -34,7 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
+from apc_core.robot import (
+    PAPER_GOAL_DEG,
+    PAPER_START_DEG,
+    Payload,
+    load_robot,
+    with_inertia_error,
+    with_payload,
+)
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_feedforward.trajectory import FourThreeFour
@@ -49,8 +56,8 @@ from apc_plant_sim.scenario import (
 #: Poses visited in turn (URDF angles, deg): the paper's start and end, its stretched pose
 #: (gravity loading of joint 2 peaks), and two more.
 POSES_DEG: tuple[tuple[float, ...], ...] = (
-    (0.0, -45.0, -45.0),
-    (90.0, 45.0, -135.0),
+    PAPER_START_DEG,
+    PAPER_GOAL_DEG,
     (45.0, 0.0, -90.0),
     (-30.0, -20.0, -60.0),
     (60.0, 30.0, -120.0),

@@ -47,6 +47,8 @@ from typing import Any
 import benchlib
 import numpy as np
 
+from apc_core.robot import PAPER_START_DEG
+
 ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
 CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
 RATE_HZ = 1000
@@ -66,7 +68,7 @@ ROBOT_SIM_PARAMS: dict[str, Any] = {
     "state_rate": float(RATE_HZ),
     "payload.mass_kg": 2.268,
     "payload.frame": "wrist_center",
-    "q_initial_deg": [0.0, -45.0, -45.0],
+    "q_initial_deg": list(PAPER_START_DEG),
 }
 
 

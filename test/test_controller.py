@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from apc_core.params import ConfigError
-from apc_core.robot import load_robot, with_inertia_error
+from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
@@ -112,7 +112,7 @@ def test_adaptive_regressor_uses_applied_torque_minus_previous_nominal(controlle
 
 def _regulate(robot, truth, w, q_position, q_velocity, samples=300):
     """Closed loop of the adaptive law with a true linear perturbation system (Eq. 16)."""
-    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    q0 = np.deg2rad(PAPER_START_DEG)
     tau0 = pin.rnea(truth.model, truth.model.createData(), q0, np.zeros(3), np.zeros(3))
     F, G = initial_model(truth.model, q0, np.zeros(3), tau0, 0.01)
     law = AdaptiveFeedback(
@@ -305,7 +305,7 @@ def _regulate_delayed(robot, lags, delay_periods, samples=400):
     from apc_feedback.presets import recommended_settings
 
     T = 0.01
-    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    q0 = np.deg2rad(PAPER_START_DEG)
     tau0 = pin.rnea(robot.model, robot.model.createData(), q0, np.zeros(3), np.zeros(3))
     A, B = continuous_jacobians(robot.model, robot.model.createData(), q0, np.zeros(3), tau0)
     F, _ = initial_model(robot.model, q0, np.zeros(3), tau0, T)

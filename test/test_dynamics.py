@@ -19,7 +19,14 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.integrate import solve_ivp
 
-from apc_core.robot import PAPER_MAX_PAYLOAD_KG, Payload, Robot, load_robot, with_payload
+from apc_core.robot import (
+    PAPER_MAX_PAYLOAD_KG,
+    PAPER_START_DEG,
+    Payload,
+    Robot,
+    load_robot,
+    with_payload,
+)
 from apc_feedforward.nominal import nominal_torque
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError, PlantStep
 
@@ -386,7 +393,7 @@ def test_set_robot_swaps_the_model_and_keeps_the_state() -> None:
     """A payload picked up mid-run: same state, new dynamics from the next step on."""
     robot = load_robot(URDF_3)
     loaded = with_payload(robot, Payload(2.268, frame="wrist_center"))
-    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    q0 = np.deg2rad(PAPER_START_DEG)
     a = Plant(robot, PlantConfig(), q0)
     a.step(np.zeros(3))
     q1 = a.q.copy()

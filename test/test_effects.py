@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from apc_core.robot import PAPER_START_DEG
 from apc_plant_sim.effects import (
     ArmEffects,
     EffectsError,
@@ -22,7 +23,7 @@ def built():
 
 
 def _arm(built, effects, qd0=None):
-    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    q0 = np.deg2rad(PAPER_START_DEG)
     return PhysicalArm(built.plant_robot, built.plant_config, effects, q0, qd0)
 
 

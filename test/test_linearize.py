@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from apc_core.robot import load_robot, with_inertia_error
+from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
 from apc_feedback.linearize import (
     LinearizeError,
     continuous_jacobians,
@@ -21,7 +21,7 @@ from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
 
 T = 0.010
-PAPER_START_DH = np.deg2rad([0.0, -45.0, -45.0])
+PAPER_START_DH = np.deg2rad(PAPER_START_DEG)
 
 
 @pytest.fixture(scope="module")

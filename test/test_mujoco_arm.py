@@ -10,7 +10,14 @@ import pytest
 
 from apc_core.config_files import resolve_config_path
 from apc_core.params import ConfigError
-from apc_core.robot import Payload, Robot, RobotModelError, load_robot, with_payload
+from apc_core.robot import (
+    PAPER_START_DEG,
+    Payload,
+    Robot,
+    RobotModelError,
+    load_robot,
+    with_payload,
+)
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
 from apc_plant_sim.effects import PANDA_FRICTION_PHI1_NM, ArmEffects, puma560_effects
@@ -148,7 +155,7 @@ def test_ideal_mujoco_arm_integrates_what_apcs_plant_integrates_on_the_same_iner
     """Same torque sequence, same RK4 step: MuJoCo's integrator and apc's plant agree to 1e-9."""
     robot = _puma3()
     physical, _ = physical_inertias(with_payload(robot, Payload(mass_kg=2.268)).model)
-    q0 = np.deg2rad([0.0, -45.0, -45.0])
+    q0 = np.deg2rad(PAPER_START_DEG)
     engine = MujocoEngine(robot, Payload(mass_kg=2.268), period=0.01, max_step=0.0025, q0=q0)
     plant = Plant(
         Robot(physical, robot.joint_names, robot.effort_limit),

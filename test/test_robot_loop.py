@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scripted_plan import HOLD_U_N, ScriptedPlan
 
+from apc_core.robot import PAPER_GOAL_DEG
 from apc_core.wire import JointSample, TrajectoryGoal
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.robot_loop import NOTHING, CommandMap, RobotLoop
@@ -236,9 +237,9 @@ def test_closed_loop_holds_without_jump_or_sag_under_an_unknown_payload():
 
 
 def test_closed_loop_tracks_the_papers_move_from_the_measured_position():
-    run = run_robot_loop(2.0, goal_deg=(90.0, 45.0, -135.0))
+    run = run_robot_loop(2.0, goal_deg=PAPER_GOAL_DEG)
     final = run.q[-1]
-    assert np.rad2deg(np.max(np.abs(final - np.deg2rad([90.0, 45.0, -135.0])))) < 0.5
+    assert np.rad2deg(np.max(np.abs(final - np.deg2rad(PAPER_GOAL_DEG)))) < 0.5
     assert run.max_tracking_error_deg() < 1.0
 
 
@@ -286,7 +287,7 @@ def test_closed_loop_runs_the_same_whatever_the_drivers_phase():
     run, is the same at any phase of the driver's cycle (a sample timer of its own made it
     depend on where activation fell)."""
     errors = [
-        run_robot_loop(1.0, goal_deg=(90.0, 45.0, -135.0), phase_ms=phase).max_tracking_error_deg()
+        run_robot_loop(1.0, goal_deg=PAPER_GOAL_DEG, phase_ms=phase).max_tracking_error_deg()
         for phase in (0.0, 0.3, 1.7, 6.9)
     ]
     assert errors[0] < 1.0
@@ -303,7 +304,7 @@ def test_closed_loop_timing_figures():
     assert f["state_to_command_median_us"] == f["state_to_command_max_us"] == 400.0
     assert f["sample_phase_max_us"] == pytest.approx(1300.0)
     assert run.counts["samples_taken"] == 50 and "missed_samples" not in run.counts
-    run = run_robot_loop(2.0, goal_deg=(90.0, 45.0, -135.0), driver_ms=1000.0 / 333)
+    run = run_robot_loop(2.0, goal_deg=PAPER_GOAL_DEG, driver_ms=1000.0 / 333)
     assert 0.0 < run.timing["carry_max_us"] <= 1000.0 / 333 / 2 * 1e3
     assert "missed_samples" not in run.counts
     assert run.max_tracking_error_deg() < 0.3
@@ -320,7 +321,7 @@ def test_the_recommended_preset_carries_over_sampling_periods(period_ms, driver_
     better at 1 ms but costs ten times the Riccati steps per sample."""
     run = run_robot_loop(
         2.0,
-        goal_deg=(90.0, 45.0, -135.0),
+        goal_deg=PAPER_GOAL_DEG,
         period_ms=period_ms,
         driver_ms=driver_ms,
         phase_ms=0.3 * driver_ms,

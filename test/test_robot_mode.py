@@ -35,7 +35,7 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
-from apc_core.robot import Payload, load_robot, with_payload
+from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, Payload, load_robot, with_payload
 from apc_plant_sim.experiment import stop_processes
 from apc_plant_sim.plant import Plant, PlantConfig
 from apc_plant_sim.scenario import CONFIG_DIR
@@ -44,8 +44,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 BIN = Path(sys.executable).parent
 ROBOT_YAML = CONFIG_DIR / "puma560_3dof_robot.yaml"
-Q0_DEG = np.array([0.0, -45.0, -45.0])
-GOAL_DEG = [90.0, 45.0, -135.0]
+Q0_DEG = np.array(PAPER_START_DEG)
+GOAL_DEG = list(PAPER_GOAL_DEG)
 COMMANDS = "/effort_controller/commands"
 SUBSTEP = 0.0005
 #: Simulated time runs at a fifth of real time: the adaptive law tolerates ~3 ms from a

@@ -26,6 +26,7 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from apc_core import wire
+from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG
 from apc_plant_sim.experiment import stop_processes
 from apc_plant_sim.scenario import CONFIG_DIR
 
@@ -316,8 +317,8 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
     goal_pub = graph.nodes[0].create_publisher(
         JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
     )
-    q0 = np.array([0.0, -45.0, -45.0])
-    goal = np.array([90.0, 45.0, -135.0])
+    q0 = np.array(PAPER_START_DEG)
+    goal = np.array(PAPER_GOAL_DEG)
     arm = [
         sys.executable,
         "-m",

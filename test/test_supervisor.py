@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scripted_plan import ScriptedPlan
 
+from apc_core.robot import PAPER_GOAL_DEG
 from apc_core.wire import JointSample
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.presets import recommended_settings
@@ -26,7 +27,7 @@ from apc_feedforward.nominal import Setpoint
 from apc_plant_sim.robot_offline import Latency, run_robot_loop
 
 T = 0.01
-GOAL_DEG = (90.0, 45.0, -135.0)
+GOAL_DEG = PAPER_GOAL_DEG
 #: The recommended preset with Eq. 16's model (no input lags): a law that a slow driver's delay
 #: makes diverge, for the supervisor to hold.
 EQ16 = {**recommended_settings(), "input_lags": 0}

@@ -331,9 +331,12 @@ def print_help(prog: str, summary: str, params: Iterable[Param]) -> None:
         print(f"  {p.name} = {p.default!r}{rng}{ro}\n      {p.description}")
 
 
-def _user_args(argv: Sequence[str]) -> list[str]:
+def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """A command line split into the program's own arguments and ROS's (``--ros-args`` and
+    everything after it, as rcl parses them)."""
     args = list(argv)
-    return args[: args.index("--ros-args")] if "--ros-args" in args else args
+    split = args.index("--ros-args") if "--ros-args" in args else len(args)
+    return args[:split], args[split:]
 
 
 #: Longest teardown of a node process before it is ended with its tracebacks (s).
@@ -450,7 +453,7 @@ def run_nodes(
     that is not 0 (or 0). The executor is ``$APC_EXECUTOR``'s, ``events`` unless set.
     """
     argv = list(sys.argv[1:] if args is None else args)
-    if {"-h", "--help"} & set(_user_args(argv)):
+    if {"-h", "--help"} & set(split_ros_args(argv)[0]):
         print_help()
         return 0
     executor_kind = os.environ.get(EXECUTOR_ENV) or "events"

@@ -80,7 +80,7 @@ from apc_core.bag import (
     qos_profiles_from_yaml,
     read_messages,
 )
-from apc_core.nodeutil import run_node
+from apc_core.nodeutil import run_node, split_ros_args
 from apc_core.params import ConfigError, Param, declare
 
 #: ``--clock`` without a value: the rate of ``ros2 bag play --clock``.
@@ -578,10 +578,9 @@ def main(args: Sequence[str] | None = None) -> int:
     args : sequence of str, optional
         Command line without the program name; default ``sys.argv[1:]``.
     """
-    argv = list(sys.argv[1:] if args is None else args)
-    split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    own, ros = split_ros_args(sys.argv[1:] if args is None else args)
     try:
-        opts = build_parser().parse_args(argv[:split])
+        opts = build_parser().parse_args(own)
     except SystemExit as exc:  # --help (0) or a usage error (2), already printed
         return int(exc.code or 0)
     kwargs = {k: v for k, v in vars(opts).items() if v is not None}
@@ -590,7 +589,7 @@ def main(args: Sequence[str] | None = None) -> int:
         prog="player",
         summary=__doc__ or "",
         params=PARAMS,
-        args=argv[split:],
+        args=ros,
         spin_until=lambda node: bool(getattr(node, "done", False)),
     )
 

@@ -33,6 +33,10 @@ PAPER_GRAVITY_M_S2 = 9.8062
 PAPER_MAX_PAYLOAD_KG = 5.0 * 0.45359237
 #: The paper's sampling period T (s), the default of every node and run.
 PAPER_PERIOD_S = 0.010
+#: The start and end of the paper's move on the 3-joint PUMA 560, in the URDF's standard-DH
+#: angles (deg): the paper's (0, 45, 45) and (90, -45, 135), its angles being (q1, -q2, -q3).
+PAPER_START_DEG = (0.0, -45.0, -45.0)
+PAPER_GOAL_DEG = (90.0, 45.0, -135.0)
 _MOVABLE = {"revolute", "prismatic"}
 _ALLOWED = _MOVABLE | {"fixed"}
 

@@ -74,6 +74,7 @@ from apc_core.nodeutil import (
     print_help,
     reject,
     run_nodes,
+    split_ros_args,
 )
 from apc_core.params import ConfigError, Param, declare, params_from, subset
 from apc_feedback.controller import FeedbackError
@@ -418,7 +419,7 @@ def _help() -> None:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if args is None else args)
-    user = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
+    user = split_ros_args(argv)[0]
     overrides = []
     if AUTOSTART_FLAG in user:
         argv.remove(AUTOSTART_FLAG)

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 from rclpy.node import Node
 
-from apc_core.nodeutil import print_help, run_nodes
+from apc_core.nodeutil import print_help, run_nodes, split_ros_args
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS
@@ -50,7 +50,7 @@ def _help(controllers_only: bool) -> None:
 
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if args is None else args)
-    user = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
+    user = split_ros_args(argv)[0]
     controllers_only = CONTROLLERS_FLAG in user
     if controllers_only:
         argv.remove(CONTROLLERS_FLAG)

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from apc_core.nodeutil import node_logs_to
-from apc_core.robot import example_robot_urdf
+from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, example_robot_urdf
 from apc_plant_sim import robot_compare
 from apc_plant_sim.analyze import analyze_file
 from apc_plant_sim.experiment import Progress, RunSpec, run_in_process
@@ -113,8 +113,8 @@ def plan(quick: bool = False, only: Sequence[str] = GROUPS) -> list[Planned]:
             payload_kg=PAPER_CASES["c"],
             payload_frame="wrist_center",
             inertia_error=(0.1, -0.1, 0.1, -0.1, 0.1, -0.1),
-            q_start_deg=(0.0, -45.0, -45.0, 0.0, 0.0, 0.0),
-            q_goal_deg=(90.0, 45.0, -135.0, 60.0, -45.0, 90.0),
+            q_start_deg=(*PAPER_START_DEG, 0.0, 0.0, 0.0),
+            q_goal_deg=(*PAPER_GOAL_DEG, 60.0, -45.0, 90.0),
             hold_s=hold,
         )
         for label, controller, settings in main:

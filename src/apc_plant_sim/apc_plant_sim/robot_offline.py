@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.robot import Payload, load_robot, with_inertia_error, with_payload
+from apc_core.robot import PAPER_START_DEG, Payload, load_robot, with_inertia_error, with_payload
 from apc_core.wire import JointSample
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
@@ -36,7 +36,6 @@ from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import CONFIG_DIR
 
 MS = 1_000_000  # ns
-Q0_DEG = (0.0, -45.0, -45.0)
 
 
 @dataclass
@@ -142,7 +141,7 @@ def run_robot_loop(
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
     plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
-    q0 = np.deg2rad(Q0_DEG)
+    q0 = np.deg2rad(PAPER_START_DEG)
     dt = round(driver_ms * MS)
     plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
     data = controller.model.createData()

@@ -26,8 +26,10 @@ import numpy as np
 from apc_core.config_files import config_dir
 from apc_core.defaults import load as load_defaults
 from apc_core.robot import (
+    PAPER_GOAL_DEG,
     PAPER_GRAVITY_M_S2,
     PAPER_MAX_PAYLOAD_KG,
+    PAPER_START_DEG,
     Payload,
     Robot,
     load_robot,
@@ -96,8 +98,8 @@ class Scenario:
     payload_com_m: tuple[float, ...] = (0.0, 0.0, 0.0)
     payload_at_s: float = 0.0
     inertia_error: tuple[float, ...] = (0.1, -0.1, 0.1)
-    q_start_deg: tuple[float, ...] = (0.0, -45.0, -45.0)
-    q_goal_deg: tuple[float, ...] = (90.0, 45.0, -135.0)
+    q_start_deg: tuple[float, ...] = PAPER_START_DEG
+    q_goal_deg: tuple[float, ...] = PAPER_GOAL_DEG
     segment_times: tuple[float, ...] = SEGMENT_TIMES
     lift_off: float = LIFT_OFF
     set_down: float = SET_DOWN
