@@ -43,8 +43,8 @@ from apc_core.robot import (
     with_payload,
 )
 from apc_feedback.laws import make_law
+from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.nominal import Feedforward
-from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import (
     PAPER_CASES,

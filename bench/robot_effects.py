@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from apc_plant_sim import robot_compare as rc
+from apc_plant_sim import robot_report
 from apc_plant_sim.effects import EFFECT_FIELDS, ArmEffects
 
 CASES = ("b", "c")
@@ -47,7 +48,7 @@ def main() -> None:
              for effect in effects for case in args.cases for law in LAWS]  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         results = rc.execute(cases, Path(tmp), progress=False)
-    verdicts = rc.beats_baselines(cases, results, "adaptive recommended")
+    verdicts = robot_report.beats_baselines(cases, results, "adaptive recommended")
     rows = {}
     print("| effect | case | " + " | ".join(f"{law}: max / final" for law in LAWS) + " | beats |")
     print("|---|---|" + "---|" * (len(LAWS) + 1))

@@ -13,9 +13,10 @@ from numpy.testing import assert_array_equal
 
 from apc_core import wire
 from apc_core.robot import load_robot
+from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import MAX_QUEUED_GOALS, GoalQueue, Lookahead
 from apc_feedforward.nominal import Feedforward, Setpoint
-from apc_feedforward.trajectory import FourThreeFour, TrajectoryError, Waypoints
+from apc_feedforward.trajectory import TrajectoryError, Waypoints
 
 URDF = Path(__file__).resolve().parents[1] / "config" / "puma560_3dof.urdf"
 T = 0.01

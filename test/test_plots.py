@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from apc_plant_sim import plots
+from apc_plant_sim import metrics, plots, plots_beyond
 from apc_plant_sim.offline import RunResult
 from apc_plant_sim.recording import RecordedRun
 from apc_plant_sim.scenario import (
@@ -137,8 +137,8 @@ def test_every_figure_writes_a_non_blank_png(tmp_path, case_c, by_load):
         plots.errors_by_load(by_load, tmp_path / "loads.png", "Figures 3-5"),
         plots.controller_comparison(case_c, tmp_path / "compare.png", "Figures 6-8"),
         plots.applied_torques(case_c, tmp_path / "torques.png", "Figure 9"),
-        plots.identified_parameters(case_c["adaptive P2(0)"], tmp_path / "id.png", "P2(0)"),
-        plots.payload_sweep(sweep, tmp_path / "deep" / "sweep.png", "sweep"),
+        plots_beyond.identified_parameters(case_c["adaptive P2(0)"], tmp_path / "id.png", "P2(0)"),
+        plots_beyond.payload_sweep(sweep, tmp_path / "deep" / "sweep.png", "sweep"),
         plots.pickup(case_c, 0.4, tmp_path / "pickup.png", "pick-up"),
     ]
     for out in outs:
@@ -207,7 +207,7 @@ def test_applied_torques_are_steps_over_the_period_they_were_applied(case_c):
 def test_identified_parameters_draw_theta_and_refuse_runs_without_it(case_c, tmp_path):
     run = case_c["adaptive P2(0)"]
     n = 3
-    fig = plots._figure_identified_parameters(run, "P2(0)")
+    fig = plots_beyond._figure_identified_parameters(run, "P2(0)")
     ax_g, ax_f, ax_w, ax_p = fig.axes[:4]
     for i in range(n):
         label = f"joint {i + 1}"
@@ -218,13 +218,13 @@ def test_identified_parameters_draw_theta_and_refuse_runs_without_it(case_c, tmp
     assert "Ĝ" in ax_g.get_ylabel() and "F̂" in ax_f.get_ylabel() and "rad/s" in ax_w.get_ylabel()
     assert ax_w.get_xlabel() == ax_p.get_xlabel() == "time (s)"
     with pytest.raises(ValueError, match="theta"):
-        plots.identified_parameters(case_c["computed torque"], tmp_path / "no.png", "CT")
+        plots_beyond.identified_parameters(case_c["computed torque"], tmp_path / "no.png", "CT")
     assert not (tmp_path / "no.png").exists()
 
 
 def test_payload_sweep_axes_scale_and_legend():
     narrow = {"a": [(0.0, [1.0, 2.0]), (1.0, [3.0, 4.0])], "b": [(0.0, [1.5, 1.0])]}
-    fig = plots._figure_payload_sweep(narrow, "narrow")
+    fig = plots_beyond._figure_payload_sweep(narrow, "narrow")
     ax = fig.axes[0]
     assert ax.get_yscale() == "linear"
     assert ax.get_xlabel() == "payload (kg)" and "deg" in ax.get_ylabel()
@@ -234,7 +234,7 @@ def test_payload_sweep_axes_scale_and_legend():
     np.testing.assert_allclose(line(ax, "a").get_ydata(), [2.0, 4.0])
 
     wide = {"ct": [(2.268, [0.2, 18.0]), (0.0, [0.1, 0.4])], "ad": [(0.0, [0.01, 0.02])]}
-    fig = plots._figure_payload_sweep(wide, "wide", per_joint=False)
+    fig = plots_beyond._figure_payload_sweep(wide, "wide", per_joint=False)
     assert fig.axes[0].get_yscale() == "log"
     np.testing.assert_allclose(line(fig.axes[0], "ct").get_xdata(), [0.0, 2.268])
 
@@ -269,7 +269,7 @@ def test_bad_inputs_are_refused(case_c):
     with pytest.raises(ValueError, match="numbers of joints"):
         plots._figure_controller_comparison({"3": case_c["computed torque"], "2": two})
     with pytest.raises(ValueError):
-        plots._figure_payload_sweep({})
+        plots_beyond._figure_payload_sweep({})
 
 
 # ------------------------------------------------------------------------------------------
@@ -282,24 +282,24 @@ def test_recovery_samples_counts_from_the_pickup_to_the_last_excursion():
     error[30:47, 1] = 2.0  # joint 2 out of tolerance from the pick-up (sample 30) to 46
     error[40, 2] = -3.0
     run = synthetic(error)
-    assert plots.recovery_samples(run, 0.30, 0.5) == 17  # sample 47 is the first for good
-    assert plots.recovery_samples(run, 0.295, 0.5) == 17  # first sample at or after 0.295 s
-    assert plots.recovery_samples(run, 0.50, 0.5) == 0  # already within tolerance
-    assert plots.recovery_samples(run, 0.30, 5.0) == 0
+    assert metrics.recovery_samples(run, 0.30, 0.5) == 17  # sample 47 is the first for good
+    assert metrics.recovery_samples(run, 0.295, 0.5) == 17  # first sample at or after 0.295 s
+    assert metrics.recovery_samples(run, 0.50, 0.5) == 0  # already within tolerance
+    assert metrics.recovery_samples(run, 0.30, 5.0) == 0
     error[80, 0] = 0.6  # a later excursion restarts the count
-    assert plots.recovery_samples(synthetic(error), 0.30, 0.5) == 51
+    assert metrics.recovery_samples(synthetic(error), 0.30, 0.5) == 51
 
 
 def test_recovery_samples_none_when_it_never_settles_and_nan_rows_are_skipped():
     error = np.full((50, 2), 0.01)
     error[20:, 0] = np.linspace(1.0, 0.2, 30)
     error[-1, 0] = 0.7  # out of tolerance at the last sample
-    assert plots.recovery_samples(synthetic(error), 0.2, 0.5) is None
+    assert metrics.recovery_samples(synthetic(error), 0.2, 0.5) is None
     error[-1, 0] = 0.1
     error[-3, :] = np.nan  # a lost sample neither breaks nor ends the recovery
     expected = int(np.argmax(error[20:, 0] < 0.5))
-    assert plots.recovery_samples(synthetic(error), 0.2, 0.5) == expected
+    assert metrics.recovery_samples(synthetic(error), 0.2, 0.5) == expected
     with pytest.raises(ValueError, match="no sample"):
-        plots.recovery_samples(synthetic(error), 5.0, 0.5)
+        metrics.recovery_samples(synthetic(error), 5.0, 0.5)
     with pytest.raises(ValueError, match="tolerance"):
-        plots.recovery_samples(synthetic(error), 0.2, 0.0)
+        metrics.recovery_samples(synthetic(error), 0.2, 0.0)

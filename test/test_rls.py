@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_feedback.rls import Rls, RlsConfig, RlsError, RlsStep, rls_update_reference
+from apc_feedback.rls import Rls, RlsConfig, RlsError, RlsStep
+from apc_feedback.rls_reference import rls_update_reference
 
 N = 3  # joints
 P_DIM = 2 * N  # state

@@ -11,8 +11,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from apc_core import bag, wire
 from apc_core.bag import BagWriter
-from apc_feedforward.trajectory import FourThreeFour, Waypoints
+from apc_feedforward.four_three_four import FourThreeFour
+from apc_feedforward.trajectory import Waypoints
 from apc_plant_sim import robot_compare as rc
+from apc_plant_sim import robot_report
 from apc_plant_sim.effects import puma560_effects
 from apc_plant_sim.recording import load_robot_run
 
@@ -138,20 +140,20 @@ def test_report_says_who_wins_and_where_the_goal_fails():
     assert {c.arm for c in cases if c.law == rc.ROBOT_FILE_LAW} == {"panda"}
     worse = rc.RobotCase("panda", "pickup", "physical", "adaptive recommended")
     results = _fake_results(cases, worse)
-    table = rc.comparison_table(cases, results, "puma3")
+    table = robot_report.comparison_table(cases, results, "puma3")
     assert table.count("\n") == 1 + 2 * len(rc.CASES) * 3
     assert "| physical | pickup | joint_3 | 1.000 / 1.000 | 0.800 / 0.800 |" in table
     ideal = "| ideal | a | joint_1 | 1.000 / 1.000 | 0.800 / 0.800 | 0.500 / 0.500 | 0.500 / 0.500"
     assert ideal + " |\n" in table  # every law on every arm: no empty column
-    verdicts = rc.beats_baselines(cases, results, "adaptive recommended")
+    verdicts = robot_report.beats_baselines(cases, results, "adaptive recommended")
     assert not verdicts["panda physical pickup sim"]["beats"]
     assert [k for k, v in verdicts.items() if not v["beats"]] == ["panda physical pickup sim"]
     assert "max vs PID on every joint" in verdicts["panda physical pickup sim"]["where_not"]
-    best = rc.winners(cases, results, "max_error_deg")
+    best = robot_report.winners(cases, results, "max_error_deg")
     assert "| panda | physical | pickup | " + ", ".join(["adaptive paper"] * 7) in best
     failed = dict(results)
     failed[cases[0].name] = {"ok": False, "path": "", "message": "timed out"}
-    assert "failed" in rc.comparison_table(cases, failed, "puma3")
+    assert "failed" in robot_report.comparison_table(cases, failed, "puma3")
 
 
 @pytest.mark.ros

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.interpolate import PPoly
 
+from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.trajectory import (
-    FourThreeFour,
     PiecewisePolynomial,
     Quintic,
     TrajectoryError,

@@ -22,9 +22,9 @@ form gives ``P(k)⁻¹ = P(0)⁻¹ + ρ⁻¹ Σᵢ z(i) z(i)ᵀ``: every sample 
 is forgotten, whatever ρ. The corrected form is the default; the printed one stays selectable
 to reproduce the paper as written.
 
-:func:`rls_update_reference` writes one update as the paper does, column by column (Eq. 29 for
-each ``θᵢ``) with fresh arrays; :class:`Rls` computes the same update for all columns at once
-in preallocated buffers, and the tests hold the two equal.
+:func:`apc_feedback.rls_reference.rls_update_reference` writes one update as the paper
+does, column by column (Eq. 29 for each ``θᵢ``) with fresh arrays; :class:`Rls` computes the
+same update for all columns at once in preallocated buffers, and the tests hold the two equal.
 
 Wind-up guard: when the data do not excite every direction of ``z`` (the arm holding still,
 ``δu`` constant) the exponential form divides the unexcited part of ``P`` by ρ at every sample,
@@ -56,140 +56,13 @@ No ROS here: numpy in, dataclasses out.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["Rls", "RlsConfig", "RlsError", "RlsStep", "rls_update_reference"]
+from apc_feedback.rls_config import RlsConfig, RlsError
 
-Forgetting = Literal["exponential", "printed"]
-_FORGETTING: tuple[str, ...] = ("exponential", "printed")
-
-
-class RlsError(ValueError):
-    """Bad configuration, bad input, or an update that would make the estimator non-finite."""
-
-
-def _real(key: str, value: Any) -> float:
-    """Return ``value`` as a finite float, or raise RlsError naming ``key``."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise RlsError(f"{key} must be a real number, got {value!r}")
-    out = float(value)
-    if not math.isfinite(out):
-        raise RlsError(f"{key} must be finite, got {value!r}")
-    return out
-
-
-@dataclass(frozen=True)
-class RlsConfig:
-    """Frozen settings of the identifier.
-
-    Attributes
-    ----------
-    rho : float
-        Forgetting factor ρ of Eqs. 27-31, ``0 < rho <= 1`` (dimensionless). The paper uses
-        0.95. ``rho = 1`` is ordinary recursive least squares.
-    alpha : float
-        ``P(0) = alpha I`` (Eq. 32), ``alpha > 0``. Large means a weak prior on Θ(0).
-    forgetting : {"exponential", "printed"}
-        ``"exponential"`` (default) divides the Eq. 30 update by ρ, the standard exponentially
-        weighted RLS; ``"printed"`` is Eq. 30 as printed, which never forgets.
-    trace_max : float or None
-        Upper bound on ``trace(P)`` (the wind-up guard, see the module docstring); ``None``
-        disables it. Must be ``> 0``. A bound below ``trace(P(0))`` is allowed and makes the
-        guard act from the first update. With ``alpha_model`` it is shared among the three
-        blocks of ``P`` in their proportions at ``P(0)``.
-    alpha_model : float or None
-        ``P(0)`` of the ``δx`` and ``δu`` rows of ``z`` (the prior on ``F̂(0), Ĝ(0)``, see the
-        module docstring): ``P(0) = diag(alpha_model I_3n, alpha)``. ``None`` (default):
-        ``alpha`` for every row, Eq. 32.
-
-    Raises
-    ------
-    RlsError
-        On construction, if a value is out of range (the message names the field).
-    """
-
-    rho: float = 0.95
-    alpha: float = 1.5e5
-    forgetting: Forgetting = "exponential"
-    trace_max: float | None = None
-    alpha_model: float | None = None
-
-    def initial_p_diagonal(self, n_joints: int, input_lags: int = 0) -> np.ndarray:
-        """The diagonal of ``P(0)`` for an arm of ``n_joints`` whose model has ``input_lags``
-        delayed inputs, shape (2n + (1 + lags) n + 1,)."""
-        model = self.alpha if self.alpha_model is None else self.alpha_model
-        return np.concatenate([np.full((3 + input_lags) * n_joints, model), [self.alpha]])
-
-    def block_trace_max(self, n_joints: int, input_lags: int = 0) -> np.ndarray | None:
-        """Per block of ``P`` (``δx``, the inputs, constant rows), the bound on its trace; None
-        when one bound on ``trace(P)`` is the guard (no ``alpha_model``) or there is no guard."""
-        if self.trace_max is None or self.alpha_model is None:
-            return None
-        diagonal = self.initial_p_diagonal(n_joints, input_lags)
-        p = 2 * n_joints
-        blocks = np.array([diagonal[:p].sum(), diagonal[p:-1].sum(), diagonal[-1]])
-        return blocks * (self.trace_max / diagonal.sum())
-
-    def __post_init__(self) -> None:
-        rho = _real("rho", self.rho)
-        if not 0.0 < rho <= 1.0:
-            raise RlsError(f"rho must satisfy 0 < rho <= 1, got {self.rho!r}")
-        alpha = _real("alpha", self.alpha)
-        if not alpha > 0.0:
-            raise RlsError(f"alpha must be > 0, got {self.alpha!r}")
-        if self.forgetting not in _FORGETTING:
-            raise RlsError(
-                f"forgetting must be one of {', '.join(_FORGETTING)}, got {self.forgetting!r}"
-            )
-        trace_max = self.trace_max
-        if trace_max is not None:
-            trace_max = _real("trace_max", trace_max)
-            if not trace_max > 0.0:
-                raise RlsError(f"trace_max must be > 0 or None, got {self.trace_max!r}")
-        alpha_model = self.alpha_model
-        if alpha_model is not None:
-            alpha_model = _real("alpha_model", alpha_model)
-            if not alpha_model > 0.0:
-                raise RlsError(f"alpha_model must be > 0 or None, got {self.alpha_model!r}")
-        # Normalise numpy / int scalars to float so equality and hashing behave.
-        object.__setattr__(self, "alpha_model", alpha_model)
-        object.__setattr__(self, "rho", rho)
-        object.__setattr__(self, "alpha", alpha)
-        object.__setattr__(self, "trace_max", trace_max)
-
-    @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> RlsConfig:
-        """Build a config from a mapping (e.g. ROS parameters read once).
-
-        Parameters
-        ----------
-        d : Mapping[str, Any]
-            Any subset of ``rho``, ``alpha``, ``forgetting``, ``trace_max``, ``alpha_model``;
-            missing keys take the defaults.
-
-        Returns
-        -------
-        RlsConfig
-
-        Raises
-        ------
-        RlsError
-            One line naming the offending key: an unknown key, a wrong type (``bool`` is not a
-            number) or a value out of range.
-        """
-        if not isinstance(d, Mapping):
-            raise RlsError(f"RLS configuration must be a mapping, got {type(d).__name__}")
-        known = ("rho", "alpha", "forgetting", "trace_max", "alpha_model")
-        unknown = sorted(str(k) for k in d if k not in known)
-        if unknown:
-            raise RlsError(
-                f"unknown RLS parameter {unknown[0]!r} (expected one of {', '.join(known)})"
-            )
-        return RlsConfig(**{k: d[k] for k in known if k in d})
+__all__ = ["Rls", "RlsConfig", "RlsError", "RlsStep"]
 
 
 class RlsStep(NamedTuple):
@@ -603,65 +476,6 @@ class Rls:
         out[p : p + q] = du_a
         out[-1] = 1.0
         return out
-
-
-def rls_update_reference(
-    theta: np.ndarray, P: np.ndarray, z: np.ndarray, dx_next: np.ndarray, config: RlsConfig
-) -> tuple[np.ndarray, np.ndarray, RlsStep]:
-    """One update of Eqs. 26, 29-31 written as the paper writes it: the readable reference
-    that :meth:`Rls.update` is tested against.
-
-    Column by column (Eq. 29 for each ``θᵢ``), fresh arrays, no checks and no buffers. The
-    same wind-up guard as :class:`Rls` (see the module docstring).
-
-    Parameters
-    ----------
-    theta : numpy.ndarray, shape (m, 2n)
-        Θ(k) = [θ₁ … θ_p] (Eq. 22); ``m = 3n+1``, or ``2n + (L+1) n + 1`` with ``L`` lags.
-    P : numpy.ndarray, shape (m, m)
-        P(k), symmetric positive definite.
-    z : numpy.ndarray, shape (m,)
-        z(k) (Eq. 23).
-    dx_next : numpy.ndarray, shape (2n,)
-        The measured δx(k+1).
-    config : RlsConfig
-
-    Returns
-    -------
-    theta_next : numpy.ndarray, shape (3n+1, 2n)
-        Θ(k+1).
-    P_next : numpy.ndarray, shape (3n+1, 3n+1)
-        P(k+1).
-    step : RlsStep
-        The a-priori residual, γ, trace(P(k+1)) and whether the guard acted.
-    """
-    gamma = 1.0 / (z @ P @ z + config.rho)  # γ(k) (Eq. 31)
-    residual = np.empty(theta.shape[1])
-    theta_next = np.empty_like(theta)
-    for i in range(theta.shape[1]):
-        theta_i = theta[:, i]  # θᵢ(k) (Eq. 21)
-        residual[i] = dx_next[i] - z @ theta_i  # eᵢ(k) = xᵢ(k+1) - zᵀ θᵢ (Eq. 26)
-        theta_next[:, i] = theta_i + gamma * (P @ z) * residual[i]  # θᵢ(k+1) (Eq. 29)
-    P_next = P - gamma * P @ np.outer(z, z) @ P  # Eq. 30 as printed
-    if config.forgetting == "exponential":
-        P_next = P_next / config.rho  # Eq. 30 corrected
-    p, m = theta.shape[1], theta.shape[0]
-    n = p // 2
-    block_max = config.block_trace_max(n, (m - p - 1) // n - 1)
-    if block_max is None:
-        clipped = config.trace_max is not None and np.trace(P_next) > config.trace_max
-        if clipped:
-            P_next = P_next * (config.trace_max / np.trace(P_next))  # wind-up guard
-    else:  # each block of P (δx, the inputs and constant rows) within its bound, by S P S
-        blocks = (slice(0, p), slice(p, m - 1), slice(m - 1, m))
-        scale = np.ones(m)
-        for block, bound in zip(blocks, block_max, strict=True):
-            trace = np.trace(P_next[block, block])
-            if trace > bound:
-                scale[block] = np.sqrt(bound / trace)
-        clipped = bool((scale < 1.0).any())
-        P_next = P_next * np.outer(scale, scale)
-    return theta_next, P_next, RlsStep(residual, gamma, float(np.trace(P_next)), clipped)
 
 
 # The ufunc reductions, without ndarray.sum's Python wrapper (a third of its cost here).

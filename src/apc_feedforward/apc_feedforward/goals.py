@@ -23,12 +23,9 @@ import pinocchio as pin
 from apc_core import wire
 from apc_core.params import ConfigError, Param
 from apc_core.robot import Robot
+from apc_feedforward.four_three_four import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour
 from apc_feedforward.nominal import Feedforward, Setpoint
 from apc_feedforward.trajectory import (
-    LIFT_OFF,
-    SEGMENT_TIMES,
-    SET_DOWN,
-    FourThreeFour,
     Quintic,
     Trajectory,
     TrajectoryError,

@@ -122,7 +122,7 @@ def write_report(out: Path, recordings: Sequence[str], results: Sequence[dict[st
     """``out/report.md``: the metrics table and, for all recordings together, the position
     errors and applied torques per joint, plus the identified parameters of each adaptive run.
     """
-    from apc_plant_sim import plots
+    from apc_plant_sim import plots, plots_beyond
 
     out.mkdir(parents=True, exist_ok=True)
     runs = {Path(p).stem: load_run(p) for p in recordings}
@@ -138,7 +138,7 @@ def write_report(out: Path, recordings: Sequence[str], results: Sequence[dict[st
     for name, run in runs.items():
         if run.theta_t is not None:
             figures.append(
-                plots.identified_parameters(
+                plots_beyond.identified_parameters(
                     run, out / f"identified_{name}.png", f"Identified parameters: {name}"
                 )
             )

@@ -17,11 +17,15 @@ Definitions
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from apc_core.robot import Robot
+
+if TYPE_CHECKING:
+    from apc_plant_sim.recording import RecordedRun
 
 
 @dataclass(frozen=True)
@@ -113,3 +117,54 @@ def compute_metrics(
         rms_torque_nm=[float(v) for v in np.sqrt(np.nanmean(applied**2, axis=0))],
         rls_residual_rms=residual,
     )
+
+
+def recovery_samples(run: RecordedRun, pickup_s: float, tolerance_deg: float) -> int | None:
+    """Samples after a pick-up until every joint stays within a tolerance for good.
+
+    Definition: let ``k0`` be the first sample at or after ``pickup_s`` (``t[k0] >= pickup_s``,
+    with 1e-9 s of slack for rounding). The result is the smallest ``m >= 0`` such that every
+    joint's ``|q - q_d| < tolerance_deg`` at every sample from ``k0 + m`` to the end of the
+    run. So 0 means the error never leaves the tolerance after the pick-up, and ``m`` means
+    sample ``k0 + m`` is the first of an unbroken run of in-tolerance samples that lasts to the
+    end. Samples with a NaN error (lost in a real-time recording) are skipped: they neither
+    break nor end that run.
+
+    Parameters
+    ----------
+    run : RecordedRun
+    pickup_s : float
+        Time of the pick-up (s, on the run's time axis).
+    tolerance_deg : float
+        Tolerance on every joint's absolute position error (deg), > 0.
+
+    Returns
+    -------
+    int or None
+        The number of samples, or None if the error is not within tolerance at the last valid
+        sample (it never recovers for good).
+
+    Raises
+    ------
+    ValueError
+        If ``tolerance_deg <= 0`` or no sample lies at or after ``pickup_s``.
+    """
+    if not tolerance_deg > 0:
+        raise ValueError(f"tolerance_deg must be > 0, got {tolerance_deg}")
+    t = np.asarray(run.t, dtype=float)
+    after = np.flatnonzero(t >= pickup_s - 1e-9)
+    if after.size == 0:
+        raise ValueError(f"no sample at or after pickup_s = {pickup_s} s (last at {t[-1]} s)")
+    k0 = int(after[0])
+    err = np.abs(np.rad2deg(run.error[k0:]))
+    valid = np.all(np.isfinite(err), axis=1)
+    inside = np.all(err < tolerance_deg, axis=1)
+    valid_rows = np.flatnonzero(valid)
+    if valid_rows.size == 0 or not inside[valid_rows[-1]]:
+        return None
+    outside = np.flatnonzero(valid & ~inside)
+    if outside.size == 0:
+        return 0
+    # The first valid in-tolerance sample after the last excursion.
+    later = valid_rows[valid_rows > outside[-1]]
+    return int(later[0])

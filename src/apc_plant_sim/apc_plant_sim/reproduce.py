@@ -35,7 +35,7 @@ from typing import Any
 
 from apc_core.nodeutil import node_logs_to
 from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, example_robot_urdf
-from apc_plant_sim import robot_compare
+from apc_plant_sim import robot_compare, robot_report
 from apc_plant_sim.analyze import analyze_file
 from apc_plant_sim.experiment import Progress, RunSpec, run_in_process
 from apc_plant_sim.scenario import (
@@ -259,7 +259,7 @@ def figures(
     planned: Sequence[Planned], outcomes: dict[str, Any], metrics: dict[str, dict], out: Path
 ) -> list[Path]:
     """The paper's Figures 3-9 and more, from the recordings (and their metrics)."""
-    from apc_plant_sim import plots
+    from apc_plant_sim import plots, plots_beyond
     from apc_plant_sim.recording import load_run
 
     made: list[Path] = []
@@ -302,7 +302,7 @@ def figures(
         for k, run in case_c.items():
             if k.startswith("adaptive") and k.endswith("P2(0)"):
                 preset = k.split()[1]
-                made.append(plots.identified_parameters(
+                made.append(plots_beyond.identified_parameters(
                     run, out / f"identified_parameters_case_c_{preset}.png",
                     f"Identified parameters, case (c), {k}",
                 ))  # fmt: skip
@@ -312,7 +312,7 @@ def figures(
             m = metrics[p.spec.name]
             sweep.setdefault(p.label, []).append((p.spec.scenario.payload_kg, m["max_error_deg"]))
     if sweep:
-        made.append(plots.payload_sweep(
+        made.append(plots_beyond.payload_sweep(
             sweep, out / "payload_sweep.png", "Maximum tracking error vs payload (0-5 lb)"
         ))  # fmt: skip
     pick = runs_of("pickup")
@@ -382,17 +382,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     made: list[Path] = []
     if not args.no_figures:
         made = figures(planned, outcomes, metrics, out)
-        made += robot_compare.figures(robot_cases, robot_results, out)
-        from apc_plant_sim import plots
+        made += robot_report.figures(robot_cases, robot_results, out)
+        from apc_plant_sim.metrics import recovery_samples
         from apc_plant_sim.recording import load_run
 
         for p in planned:
             if p.group == "pickup" and p.spec.name in metrics:
                 run = load_run(outcomes[p.spec.name]["path"])
-                summary["recovery_samples"][p.label] = plots.recovery_samples(run, 0.5, 0.05)
+                summary["recovery_samples"][p.label] = recovery_samples(run, 0.5, 0.05)
     summary["wall_s"] = round(time.monotonic() - t0, 1)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    robot_text = robot_compare.report_section(robot_cases, robot_results) if robot_cases else ""
+    robot_text = robot_report.report_section(robot_cases, robot_results) if robot_cases else ""
     report = write_report(out, planned, metrics, paper, summary, made, robot_text)
     print(report.split("\n## ")[1] if "\n## " in report else report)
     print(f"\nreport: {out / 'report.md'} ({len(planned)} runs, {summary['wall_s']} s)")

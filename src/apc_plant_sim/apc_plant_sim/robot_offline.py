@@ -30,8 +30,8 @@ from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
+from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import GoalQueue
-from apc_feedforward.trajectory import FourThreeFour
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 from apc_plant_sim.scenario import CONFIG_DIR
 

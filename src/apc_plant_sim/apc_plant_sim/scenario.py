@@ -43,8 +43,8 @@ from apc_feedback.presets import (  # noqa: F401  (re-exported: the runs name th
     physical_settings,
     recommended_settings,
 )
+from apc_feedforward.four_three_four import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour
 from apc_feedforward.nominal import Feedforward
-from apc_feedforward.trajectory import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour
 from apc_plant_sim.effects import ArmEffects, PhysicalArm
 from apc_plant_sim.offline import RunResult, run_closed_loop
 from apc_plant_sim.plant import Plant, PlantConfig
