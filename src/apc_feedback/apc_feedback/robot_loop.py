@@ -297,12 +297,12 @@ class RobotLoop:
         next write (ros2_control's read, update, write cycle); what a drive or the transport
         add beyond that the identified lags learn.
         """
-        driver_period = self.sampler.driver_period_ns * 1e-9
+        driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
         expect = getattr(self.law, "expect_input_delay", None)
-        if expect is not None and driver_period > 0.0:
+        if expect is not None:
             expect(driver_period)
-        if self.supervisor is not None and driver_period > 0.0:
-            if self.fallback is not None and self.fallback.kind == "computed_torque":
+        if self.supervisor is not None and self.fallback is not None:
+            if self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
         if self._replan:
             self._drop_plan(k)

@@ -88,7 +88,7 @@ from apc_feedback.robot_sampling import (
     StateRejectedError,
 )
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, SupervisorError, fallback_law
-from apc_feedforward.goals import MOVE_PARAMS, GoalQueue
+from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, setpoint_message
 
 AUTOSTART_FLAG = "--autostart"
 
@@ -398,18 +398,8 @@ class RobotNode(LifecycleNode):
                 )
             )
         if setpoint is not None and self.setpoint_pub.get_subscription_count():
-            t_ns = wire.seconds_to_ns(setpoint.t) if setpoint.t > 0 else 0
             self.setpoint_pub.publish(
-                wire.setpoint_to_msg(
-                    wire.sample_stamp_ns(setpoint.k, self._period_ns),
-                    self.joint_names,
-                    setpoint.q,
-                    setpoint.qd,
-                    setpoint.qdd,
-                    setpoint.u_n,
-                    t_ns,
-                    self._setpoint_msg,
-                )
+                setpoint_message(setpoint, self._period_ns, self.joint_names, self._setpoint_msg)
             )
 
 

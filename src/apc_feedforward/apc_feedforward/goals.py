@@ -53,6 +53,19 @@ MOVE_PARAMS: tuple[Param, ...] = (
 )
 
 
+def setpoint_message(
+    sp: Setpoint, period_ns: int, joint_names: Sequence[str], msg: Any = None
+) -> Any:
+    """Set point ``sp`` as the ``feedforward/setpoint`` message (a one-point
+    ``JointTrajectory`` stamped ``kT``, validated for the wire; ``msg`` is refilled if given),
+    whoever publishes the plan: ``feedforward_node`` beside apc's plant, ``robot_node`` on a
+    robot."""
+    t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
+    return wire.setpoint_to_msg(
+        wire.sample_stamp_ns(sp.k, period_ns), joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, msg
+    )
+
+
 @dataclass
 class Sampled(Generic[R]):
     """What :meth:`GoalQueue.sample` did for one sample.

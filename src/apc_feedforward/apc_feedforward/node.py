@@ -45,7 +45,7 @@ from apc_core.nodeutil import (
     run_node,
 )
 from apc_core.params import Param, declare
-from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled
+from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled, setpoint_message
 from apc_feedforward.nominal import Setpoint
 
 PARAMS: tuple[Param, ...] = (
@@ -162,11 +162,8 @@ class FeedforwardNode(Node):
 
     def _messages(self, sp: Setpoint) -> tuple[JointTrajectory, JointState]:
         """Set point and nominal torque of ``sp`` as messages (validated for the wire)."""
+        setpoint = setpoint_message(sp, self.period_ns, self.joint_names, self._setpoint_msg)
         stamp = wire.sample_stamp_ns(sp.k, self.period_ns)
-        t_ns = wire.seconds_to_ns(sp.t) if sp.t > 0 else 0
-        setpoint = wire.setpoint_to_msg(
-            stamp, self.joint_names, sp.q, sp.qd, sp.qdd, sp.u_n, t_ns, self._setpoint_msg
-        )
         torque = wire.torque_to_msg(stamp, self.joint_names, sp.u_n, self._torque_msg)
         return setpoint, torque
 
