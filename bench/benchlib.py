@@ -295,7 +295,7 @@ def log_tail(workdir: Path, tag: str, lines: int = 5) -> str:
 
 def stop_processes(procs: Sequence[subprocess.Popen], timeout_s: float = 5.0) -> None:
     """SIGINT, then SIGTERM, then SIGKILL, each with a timeout: every child ends."""
-    from apc_plant_sim.experiment import stop_processes as stop
+    from apc_lab.experiment import stop_processes as stop
 
     stop(procs, timeout_s=timeout_s)
 
@@ -348,7 +348,7 @@ BUCKETS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("recorder (MCAP)", ("recorder.py", "apc_core/bag/", "/mcap/", "zstandard")),
     (
         "messages (wire, msg classes)",
-        ("apc_core/wire/", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
+        ("apc_msgs_py/", "/msg/_", "builtin_interfaces", "/rosgraph_msgs/"),
     ),
     ("apc nodes (callbacks, diagnostics)", ("/node.py", "nodeutil.py", "node_proc.py")),
     (

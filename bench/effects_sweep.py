@@ -27,14 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from apc_plant_sim.effects import EFFECT_FIELDS, puma560_effects, single_effect
-from apc_plant_sim.scenario import (
+from apc_lab.scenario import (
     paper_scenario,
     paper_settings,
     physical_settings,
     recommended_settings,
     run_offline,
 )
+from apc_plant_sim.effects import EFFECT_FIELDS, puma560_effects, single_effect
 
 EFFECTS = ("ideal", *EFFECT_FIELDS, "all")
 CASES = ("a", "b", "c", "pickup")

@@ -1,6 +1,6 @@
 """How late may a command reach the arm? The adaptive law in robot mode, closed offline.
 
-:func:`apc_plant_sim.robot_offline.run_robot_loop`: the 3-joint PUMA 560 with 5 lb the
+:func:`apc_lab.robot_offline.run_robot_loop`: the 3-joint PUMA 560 with 5 lb the
 controllers do not know, robot mode's loop at T = 10 ms on a driver's clock, no ROS. Two
 tables:
 
@@ -22,8 +22,8 @@ from __future__ import annotations
 import argparse
 
 from apc_core.robot import PAPER_GOAL_DEG
-from apc_plant_sim.robot_offline import Latency, run_robot_loop
-from apc_plant_sim.scenario import recommended_settings
+from apc_lab.robot_offline import Latency, run_robot_loop
+from apc_lab.scenario import recommended_settings
 
 ALPHA_MODELS = (0.0, 1e-4, 1e-3, 1e-2)
 #: (label, latency factory per seed) of the hold table.

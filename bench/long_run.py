@@ -1,6 +1,6 @@
 """Long runs offline: an hour of repeated moves and holds with payload changes, no ROS.
 
-The closed loop of :func:`apc_plant_sim.offline.run_closed_loop` (plant -> feedforward ->
+The closed loop of :func:`apc_lab.offline.run_closed_loop` (plant -> feedforward ->
 feedback, one sample at a time, the same core modules the nodes run), driven by a schedule:
 4-3-4 moves between a cycle of poses (``Feedforward.set_trajectory``), holds of 0.5 to 20 s in
 between, and the payload on the simulated arm changed every few moves
@@ -9,7 +9,7 @@ per sample: running maxima and counts are kept per time segment.
 
 Configurations: ``guarded``, the default adaptive settings (the RLS wind-up guard on,
 ``trace_max = 0``: trace(P) <= trace(P(0))), and ``paper``, the printed settings
-(:func:`apc_plant_sim.scenario.paper_settings`, no guard); ``guarded_qpos`` / ``paper_qpos``
+(:func:`apc_lab.scenario.paper_settings`, no guard); ``guarded_qpos`` / ``paper_qpos``
 are the same with a position-weighted Q (``q_position = 1e3``). Prints JSON: per configuration and
 segment the max |error| per joint (deg) during moves and during holds, max trace(P), refused
 RLS updates (``FeedbackOutput.rejected``), saturated samples, finiteness, and the wall time.
@@ -45,13 +45,13 @@ from apc_core.robot import (
 from apc_feedback.laws import make_law
 from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.nominal import Feedforward
-from apc_plant_sim.plant import Plant, PlantConfig, PlantError
-from apc_plant_sim.scenario import (
+from apc_lab.scenario import (
     PAPER_CASES,
     paper_scenario,
     paper_settings,
     recommended_settings,
 )
+from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 
 #: Poses visited in turn (URDF angles, deg): the paper's start and end, its stretched pose
 #: (gravity loading of joint 2 peaks), and two more.

@@ -143,10 +143,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from apc_core.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
-    from apc_core.recorder import RecorderNode
     from apc_feedback.node import FeedbackNode
     from apc_feedforward.node import FeedforwardNode
     from apc_plant_sim.node import PlantNode
+    from apc_recording.recorder import RecorderNode
 
     params = json.loads(Path(args.params).read_text())
 

@@ -2,7 +2,7 @@
 unknown payload, and does it track the move that follows the hold?
 
 The Franka Panda on robot_sim (MuJoCo, ideal arm, sim time) with the robot-mode controllers
-(:mod:`apc_plant_sim.robot_compare`: 10 % inertia error, 5 lb unknown to the model in (c) and
+(:mod:`apc_lab.robot_compare`: 10 % inertia error, 5 lb unknown to the model in (c) and
 the pickup): the arm holds its measured position for a while, then the move arrives as a goal.
 Per law: the worst joint's sag while holding (deg, 5 lb, the 0.3 s hold), max / final error
 of (a), (c) and the pickup after a 0.3 s hold, and max error of (c) after 1 s and 5 s holds.
@@ -19,8 +19,8 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from apc_plant_sim import robot_compare as rc
-from apc_plant_sim.scenario import paper_settings, recommended_settings
+from apc_lab import robot_compare as rc
+from apc_lab.scenario import paper_settings, recommended_settings
 
 LAWS = {
     "panda_robot.yaml": rc.robot_file_law("panda"),

@@ -15,8 +15,8 @@ import json
 
 import numpy as np
 
-from apc_plant_sim.metrics import compute_metrics
-from apc_plant_sim.scenario import CONFIG_DIR, build, paper_scenario, paper_settings, run_offline
+from apc_lab.metrics import compute_metrics
+from apc_lab.scenario import CONFIG_DIR, build, paper_scenario, paper_settings, run_offline
 
 CASES = {"a": "a_no_load", "b": "b_half_load", "c": "c_max_load"}
 CONTROLLERS = {

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from apc_plant_sim.scenario import paper_scenario, run_offline
+from apc_lab.scenario import paper_scenario, run_offline
 
 BASE = {"r": 1e-6, "rho": 0.95, "alpha": 1.5e5, "trace_max": 0.0}
 CANDIDATES = {

@@ -117,7 +117,7 @@ def run_errors(
     rad/s), each keyed by its stamp (ns, on the sample grid kT).
 
     The move starts at the last paired sample before the first set point that moves (as
-    :func:`apc_plant_sim.recording.load_robot_run`) and ends ``move_s`` later. Returns the max
+    :func:`apc_recording.runs.load_robot_run`) and ends ``move_s`` later. Returns the max
     error per joint over the move and the error at its end (deg; None when the move's end was
     not sampled; else at the last paired sample up to it, should the end's own sample be
     missed), ``run_max_error_deg`` over every paired sample (a non-finite position counts
@@ -300,8 +300,8 @@ def robot_file_overrides(arm: str) -> dict[str, Any]:
     """``robot_node`` values that put the arm's robot file back on its preset: each
     ``adaptive.*`` the file sets, at the preset's value (or the law's default)."""
     from apc_feedback.presets import DEFAULT_PRESET, PRESETS
-    from apc_plant_sim import robot_compare as rc
-    from apc_plant_sim.experiment import law_parameters
+    from apc_lab import robot_compare as rc
+    from apc_lab.experiment import law_parameters
 
     params = yaml.safe_load((benchlib.CONFIG / rc.ROBOT_FILES[arm]).read_text())
     node = params["robot_node"]["ros__parameters"]
@@ -327,7 +327,7 @@ def controller_arguments(arm: str, law: str) -> list[str]:
 
 def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, Any]:
     """robot_sim's parameters: robot_compare's case (c) for the arm on wall time at ``rate_hz``."""
-    from apc_plant_sim import robot_compare as rc
+    from apc_lab import robot_compare as rc
 
     case = rc.RobotCase(arm, "c", effects, "computed torque", timing="realtime")
     params = rc.node_parameters(case)["robot_sim"]
@@ -369,7 +369,7 @@ class Observer:
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
 
-        from apc_core import wire
+        import apc_msgs_py as wire
 
         self.wire = wire
         self.node = Node("robot_clock_bench", context=context)
@@ -475,7 +475,7 @@ class WallRun:
         self._spawn(
             "robot_sim", [str(BIN / "robot_sim"), "--ros-args", "--params-file", str(sim_file)]
         )
-        from apc_plant_sim import robot_compare as rc
+        from apc_lab import robot_compare as rc
 
         robot_file = benchlib.CONFIG / rc.ROBOT_FILES[s.arm]
         cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(robot_file)]
@@ -512,7 +512,7 @@ class WallRun:
         from lifecycle_msgs.msg import Transition
 
         from apc_core.nodeutil import make_executor
-        from apc_plant_sim import robot_compare as rc
+        from apc_lab import robot_compare as rc
 
         s = self.spec
         scenario = rc.arm_scenario(s.arm, "c")

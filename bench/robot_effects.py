@@ -1,7 +1,7 @@
 """Which physical-arm effect breaks a law through the robot interface: one effect at a time.
 
 An arm on robot_sim (MuJoCo, sim time) with the robot-mode controllers
-(:mod:`apc_plant_sim.robot_compare`), each effect of robot_sim's preset for the arm alone
+(:mod:`apc_lab.robot_compare`), each effect of robot_sim's preset for the arm alone
 (``puma560``: friction, armature, quantisation, velocity noise, the velocity differenced by the
 drive, a one-driver-period delay; ``panda``: friction, quantisation, the differenced velocity,
 the delay), then all of them: the recommended preset against PID and computed torque, max and
@@ -20,8 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from apc_plant_sim import robot_compare as rc
-from apc_plant_sim import robot_report
+from apc_lab import robot_compare as rc
+from apc_lab import robot_report
 from apc_plant_sim.effects import EFFECT_FIELDS, ArmEffects
 
 CASES = ("b", "c")

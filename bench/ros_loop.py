@@ -64,8 +64,8 @@ def node_parameters(
     lookahead: int = 1,
 ) -> dict[str, dict[str, Any]]:
     """Parameters of the three nodes: the paper's case (c), adaptive law, at ``period``."""
-    from apc_plant_sim.experiment import RunSpec
-    from apc_plant_sim.scenario import paper_scenario
+    from apc_lab.experiment import RunSpec
+    from apc_lab.scenario import paper_scenario
 
     scenario = paper_scenario("c", hold_s=0.5)
     scenario = replace(scenario, period=period, step=period / 4.0)

@@ -17,7 +17,7 @@ import json
 
 import numpy as np
 
-from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 
 
 def main() -> None:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from apc_core.wire import TrajectoryGoal
 from apc_feedforward.goals import Sampled
 from apc_feedforward.nominal import Setpoint
+from apc_msgs_py import TrajectoryGoal
 
 HOLD_U_N = 0.5  # the scripted plan's nominal torque on a hold
 

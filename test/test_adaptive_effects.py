@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
-from apc_plant_sim.effects import puma560_effects, single_effect
-from apc_plant_sim.scenario import (
+from apc_lab.scenario import (
     paper_scenario,
     physical_settings,
     recommended_settings,
     run_offline,
 )
+from apc_plant_sim.effects import puma560_effects, single_effect
 
 
 def _max_error_deg(effect: str, **options) -> float:
@@ -66,7 +66,7 @@ def test_options_change_nothing_when_off():
 
 def test_a_stuck_joint_skips_identification():
     from apc_core.robot import load_robot
-    from apc_plant_sim.scenario import CONFIG_DIR
+    from apc_lab.scenario import CONFIG_DIR
 
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     law = AdaptiveFeedback(robot.model, AdaptiveConfig(identify_min_speed=0.05))

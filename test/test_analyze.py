@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from apc_plant_sim.analyze import analyze_file, main
-from apc_plant_sim.experiment import RunSpec, run_in_process
-from apc_plant_sim.metrics import compute_metrics, tip_lever_arms
-from apc_plant_sim.scenario import build, paper_scenario, run_offline
+from apc_lab.analyze import analyze_file, main
+from apc_lab.experiment import RunSpec, run_in_process
+from apc_lab.metrics import compute_metrics, tip_lever_arms
+from apc_lab.scenario import build, paper_scenario, run_offline
 
 pytestmark = pytest.mark.ros
 
@@ -55,8 +55,8 @@ def test_a_recording_carries_the_arms_urdf_and_its_tip_without_a_stored_scenario
     """The plant publishes its URDF on robot_description (transient local) and the recorder
     keeps it: a recording made by the separate nodes, with no run description stored, still
     gives the tip displacement, the same as with the scenario."""
-    from apc_plant_sim import recording as rec
-    from apc_plant_sim.recording import load_run
+    from apc_recording import runs as rec
+    from apc_recording.runs import load_run
 
     _, path = recording
     assert load_run(path).robot_description.lstrip().startswith("<")

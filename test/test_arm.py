@@ -1,4 +1,4 @@
-"""``arm``: the nodes of one arm composed in one process (apc_plant_sim.arm).
+"""``arm``: the nodes of one arm composed in one process (apc_lab.arm).
 
 A lockstep run of the composed executable is the offline loop bit for bit (checked on every
 joint state an observer in this process receives: position, velocity, and the applied torque
@@ -21,9 +21,9 @@ import yaml
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from apc_core import wire
-from apc_plant_sim.experiment import RunSpec
-from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+import apc_msgs_py as wire
+from apc_lab.experiment import RunSpec
+from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -40,9 +40,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty, Float64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import bag, wire
-from apc_core.bag import BagError, BagTruncatedWarning, BagWriter
-from apc_core.bag.recovery import main as bag_recover
+import apc_msgs_py as wire
+from apc_recording import bag
+from apc_recording.bag import BagError, BagTruncatedWarning, BagWriter
+from apc_recording.bag.recovery import main as bag_recover
 
 with warnings.catch_warnings():  # mcap_ros2.reader warns about itself on import (deprecation)
     warnings.simplefilter("ignore", DeprecationWarning)
@@ -471,7 +472,7 @@ def test_ros2_profile_encodings_channel_metadata_and_rosbag2_record(run_bag):
         reader = make_reader(stream)
         header = reader.get_header()
         assert header.profile == "ros2"
-        assert header.library.startswith("apc_core.bag")
+        assert header.library.startswith("apc_recording.bag")
         summary = reader.get_summary()
         schemas = {s.name: s for s in summary.schemas.values()}
         assert set(schemas) == {s.type_name for s in wire.TOPICS}  # one schema per type
@@ -794,7 +795,8 @@ _CHILD = textwrap.dedent(
     """
     import sys, time
     from rclpy.serialization import serialize_message
-    from apc_core import bag, wire
+    import apc_msgs_py as wire
+    from apc_recording import bag
     import numpy as np
     path, n = sys.argv[1], int(sys.argv[2])
     writer = bag.BagWriter(path, chunk_size=2048)

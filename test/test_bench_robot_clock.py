@@ -183,7 +183,7 @@ def test_the_plan_covers_every_rate_arm_effect_and_law():
 
 def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override():
     from apc_feedback.presets import PRESETS
-    from apc_plant_sim.experiment import law_parameters
+    from apc_lab.experiment import law_parameters
 
     preset = law_parameters("adaptive", PRESETS["recommended"]())["adaptive.q_velocity"]
     assert preset != 10.0  # the Panda file's value

@@ -15,7 +15,7 @@ from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackEr
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import one_step_control
-from apc_plant_sim.scenario import CONFIG_DIR
+from apc_lab.scenario import CONFIG_DIR
 
 rng = np.random.default_rng(7)
 

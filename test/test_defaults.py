@@ -15,8 +15,8 @@ from apc_core.defaults import (
     start_and_goal,
 )
 from apc_core.robot import RobotModelError
-from apc_plant_sim.reproduce import example_robot_urdf
-from apc_plant_sim.scenario import CONFIG_DIR, Scenario, recommended_settings, run_offline
+from apc_lab.reproduce import example_robot_urdf
+from apc_lab.scenario import CONFIG_DIR, Scenario, recommended_settings, run_offline
 
 PANDA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
 
@@ -143,7 +143,7 @@ def test_the_derived_move_is_tracked_with_the_recommended_preset(arm):
 
 
 def test_experiment_with_a_urdf_derives_what_is_not_given_and_prints_each(tmp_path, capsys):
-    from apc_plant_sim.experiment import build_parser, spec_from_args
+    from apc_lab.experiment import build_parser, spec_from_args
 
     urdf = str(CONFIG_DIR / "puma560.urdf")
     _, d = load(urdf)

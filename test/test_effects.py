@@ -7,6 +7,7 @@ import pinocchio as pin
 import pytest
 
 from apc_core.robot import PAPER_START_DEG
+from apc_lab.scenario import build, paper_scenario, recommended_settings, run_offline
 from apc_plant_sim.effects import (
     ArmEffects,
     EffectsError,
@@ -14,7 +15,6 @@ from apc_plant_sim.effects import (
     puma560_effects,
     single_effect,
 )
-from apc_plant_sim.scenario import build, paper_scenario, recommended_settings, run_offline
 
 
 @pytest.fixture(scope="module")

@@ -33,13 +33,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.robot import load_robot
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
-from apc_plant_sim.experiment import RunSpec
+from apc_lab.experiment import RunSpec
+from apc_lab.scenario import PUMA_3DOF_URDF, paper_scenario, paper_settings, run_offline
 from apc_plant_sim.node import PlantNode
-from apc_plant_sim.scenario import PUMA_3DOF_URDF, paper_scenario, paper_settings, run_offline
 
 pytestmark = pytest.mark.ros
 
@@ -927,8 +927,8 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     torque for the current sample does not replace or add to the first; a nominal torque one
     sample ahead is kept for its sample; a huge valid torque is clipped to the URDF limits and
     counted."""
+    from apc_lab.scenario import build
     from apc_plant_sim.plant import Plant
-    from apc_plant_sim.scenario import build
 
     scenario = paper_scenario("a")
     params = RunSpec(scenario, "none").node_parameters()["plant_node"]
@@ -1053,9 +1053,9 @@ def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(gr
 def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     """PD with absurd gains in a lockstep run: every applied torque in the recording is within
     the URDF's effort limits, and saturation is on the recorded /diagnostics."""
-    from apc_core.bag import read_messages
-    from apc_plant_sim.experiment import run_in_process
-    from apc_plant_sim.recording import load_run
+    from apc_lab.experiment import run_in_process
+    from apc_recording.bag import read_messages
+    from apc_recording.runs import load_run
 
     spec = RunSpec(
         paper_scenario("c", hold_s=0.2), "pd", {"kp": 1e6, "kv": 1e4}, "lockstep", name="sat"

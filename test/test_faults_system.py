@@ -41,18 +41,18 @@ from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from apc_core import wire
-from apc_core.bag import BagTruncatedWarning, bag_info, read_messages
-from apc_core.bag.recovery import main as bag_recover
-from apc_plant_sim.experiment import RunSpec, stop_processes
-from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+import apc_msgs_py as wire
+from apc_lab.experiment import RunSpec, stop_processes
+from apc_lab.scenario import paper_scenario, paper_settings, run_offline
+from apc_recording.bag import BagTruncatedWarning, bag_info, read_messages
+from apc_recording.bag.recovery import main as bag_recover
 
 REPO = Path(__file__).resolve().parents[1]
 MODULES = {
     "plant_node": "apc_plant_sim.node",
     "feedforward_node": "apc_feedforward.node",
     "feedback_node": "apc_feedback.node",
-    "recorder": "apc_core.recorder",
+    "recorder": "apc_recording.recorder",
 }
 T = 0.010
 WATCHDOG_S = 0.05
@@ -560,7 +560,7 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
     tmp_path.mkdir(parents=True, exist_ok=True)
     obs = Observer(states=False)
     out = tmp_path / "runs"
-    cmd = [sys.executable, "-m", "apc_plant_sim.experiment", "--case", "c", "--hold", "60"]
+    cmd = [sys.executable, "-m", "apc_lab.experiment", "--case", "c", "--hold", "60"]
     cmd += ["--quiet", "--out", str(out), "--name", "sig", "--timeout", "120"]
     cmd += ["--processes"] if processes else []
     with open(tmp_path / "runner.err", "wb") as err:
@@ -1006,7 +1006,7 @@ def test_network_namespaces_with_delay_and_loss(tmp_path):
     run on a shared 2-core machine also depends on the machine's load: a run that misses the
     bound is repeated once, and both are reported.
     """
-    from apc_plant_sim.recording import load_run
+    from apc_recording.runs import load_run
 
     if os.geteuid() != 0:
         pytest.skip("network namespaces need root")

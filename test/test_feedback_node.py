@@ -15,12 +15,12 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.nodeutil import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
 from apc_core.params import ConfigError
 from apc_feedback.node import FeedbackNode
-from apc_plant_sim.experiment import RunSpec
-from apc_plant_sim.scenario import paper_scenario
+from apc_lab.experiment import RunSpec
+from apc_lab.scenario import paper_scenario
 
 pytestmark = pytest.mark.ros
 

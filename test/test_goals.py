@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.robot import load_robot
 from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import MAX_QUEUED_GOALS, GoalQueue, Lookahead

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.robot import load_robot
 from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
 from apc_plant_sim.plant import Plant, PlantConfig

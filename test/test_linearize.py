@@ -17,8 +17,8 @@ from apc_feedback.linearize import (
     initial_model,
     split_input_matrix,
 )
+from apc_lab.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
 from apc_plant_sim.plant import Plant, PlantConfig
-from apc_plant_sim.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
 
 T = 0.010
 PAPER_START_DH = np.deg2rad(PAPER_START_DEG)

@@ -1,7 +1,7 @@
 """A lockstep ROS run equals the offline closed loop, bit for bit, in one and in three processes.
 
 This is the integration test that catches off-by-one sample bugs: the recording of the real
-nodes over DDS is read back and compared with :func:`apc_plant_sim.scenario.run_offline` on
+nodes over DDS is read back and compared with :func:`apc_lab.scenario.run_offline` on
 every recorded signal.
 """
 
@@ -10,14 +10,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_plant_sim.experiment import RunSpec, run_in_process, run_in_processes
-from apc_plant_sim.recording import load_run
-from apc_plant_sim.scenario import (
+from apc_lab.experiment import RunSpec, run_in_process, run_in_processes
+from apc_lab.scenario import (
     paper_scenario,
     paper_settings,
     recommended_settings,
     run_offline,
 )
+from apc_recording.runs import load_run
 
 pytestmark = pytest.mark.ros
 
@@ -87,7 +87,7 @@ def test_a_real_recording_opens_in_independent_readers(tmp_path):
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
 
-    from apc_core.bag import bag_info
+    from apc_recording.bag import bag_info
 
     spec = RunSpec(paper_scenario("b", hold_s=0.0), "adaptive", paper_settings(), name="readers")
     outcome = run_in_process(spec, tmp_path, progress=False, timeout_s=120)

@@ -20,6 +20,8 @@ from apc_core.robot import (
 )
 from apc_feedback.laws import make_law
 from apc_feedforward.nominal import Feedforward
+from apc_lab.reproduce import example_robot_urdf
+from apc_lab.scenario import build, paper_scenario, recommended_settings
 from apc_plant_sim.effects import PANDA_FRICTION_PHI1_NM, ArmEffects, puma560_effects
 from apc_plant_sim.engines import EngineError, effects_from_values, make_engine
 from apc_plant_sim.mujoco_arm import (
@@ -30,9 +32,7 @@ from apc_plant_sim.mujoco_arm import (
     physical_inertias,
 )
 from apc_plant_sim.plant import Plant, PlantConfig
-from apc_plant_sim.reproduce import example_robot_urdf
 from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
-from apc_plant_sim.scenario import build, paper_scenario, recommended_settings
 
 RNG_STATES = 200
 

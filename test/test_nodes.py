@@ -13,15 +13,15 @@ from builtin_interfaces.msg import Duration
 from rclpy.parameter import Parameter
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import wire
-from apc_core.bag import read_messages
+import apc_msgs_py as wire
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_feedforward.trajectory import Waypoints
-from apc_plant_sim.experiment import RunSpec, run_in_processes
+from apc_lab.experiment import RunSpec, run_in_processes
+from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_plant_sim.node import PlantNode
-from apc_plant_sim.recording import load_run
-from apc_plant_sim.scenario import paper_scenario, paper_settings, run_offline
+from apc_recording.bag import read_messages
+from apc_recording.runs import load_run
 
 pytestmark = pytest.mark.ros
 

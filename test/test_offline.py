@@ -8,9 +8,8 @@ import pytest
 
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedforward.nominal import Feedforward
-from apc_plant_sim.offline import run_closed_loop
-from apc_plant_sim.plant import Plant
-from apc_plant_sim.scenario import (
+from apc_lab.offline import run_closed_loop
+from apc_lab.scenario import (
     PAPER_CASES,
     Scenario,
     ScenarioError,
@@ -19,6 +18,7 @@ from apc_plant_sim.scenario import (
     paper_settings,
     run_offline,
 )
+from apc_plant_sim.plant import Plant
 
 
 class Recorder(FeedbackLaw):

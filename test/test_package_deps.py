@@ -17,7 +17,15 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("apc_core", "apc_feedforward", "apc_feedback", "apc_plant_sim")
+PACKAGES = (
+    "apc_msgs_py",
+    "apc_core",
+    "apc_recording",
+    "apc_feedforward",
+    "apc_feedback",
+    "apc_plant_sim",
+    "apc_lab",
+)
 #: Imported module -> rosdep key (the module's own name when it is a ROS package).
 KEYS = {
     "numpy": "python3-numpy",
@@ -89,10 +97,22 @@ def test_the_pip_keys_are_defined_for_rosdep():
         assert set(defined[key]) == {"debian", "ubuntu"}, key
 
 
-def test_dependencies_point_one_way():
-    """apc_core needs no other apc package; the feedforward needs no feedback; neither
-    controller needs the plant."""
-    assert not _declared("apc_core") & set(PACKAGES)
-    assert "apc_feedback" not in _declared("apc_feedforward")
-    for controller in ("apc_feedforward", "apc_feedback"):
-        assert "apc_plant_sim" not in _declared(controller) | _imports(controller)
+#: The apc packages each package may use: the contract, the runtime, then recording, the two
+#: controllers and the simulated arms beside each other, and the lab on top (nothing uses it).
+MAY_USE = {
+    "apc_msgs_py": set(),
+    "apc_core": {"apc_msgs_py"},
+    "apc_recording": {"apc_msgs_py", "apc_core"},
+    "apc_feedforward": {"apc_msgs_py", "apc_core"},
+    "apc_feedback": {"apc_msgs_py", "apc_core", "apc_feedforward"},
+    "apc_plant_sim": {"apc_msgs_py", "apc_core"},
+    "apc_lab": set(PACKAGES) - {"apc_lab"},
+}
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_dependencies_point_one_way(package):
+    """No package uses one above it: the simulated arms import no controller, a robot install
+    (robot_node) pulls in neither the simulator nor the lab."""
+    used = (_declared(package) | _imports(package)) & set(PACKAGES) - {package}
+    assert used <= MAY_USE[package], f"{package} uses {sorted(used - MAY_USE[package])}"

@@ -11,7 +11,6 @@ source checkout.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import signal
 import subprocess
@@ -29,14 +28,16 @@ VENV = Path(sys.prefix)
 VENV_BIN = VENV / "bin"
 
 EXECUTABLES: dict[str, tuple[str, ...]] = {
-    "apc_core": ("recorder", "player", "bag_recover"),
+    "apc_recording": ("recorder", "player", "bag_recover"),
     "apc_feedforward": ("feedforward_node",),
     "apc_feedback": ("feedback_node", "robot_node"),
-    "apc_plant_sim": ("plant_node", "robot_sim", "arm", "experiment", "analyze", "apc_params"),
+    "apc_plant_sim": ("plant_node", "robot_sim"),
+    "apc_lab": ("arm", "experiment", "analyze", "apc_params"),
 }
-#: One executable of each package, run to ``--help``.
+#: One node of each package that has one, run to ``--help`` (the lab's ``experiment`` runs from
+#: the install below).
 HELP_RUNS = (
-    ("apc_core", "recorder"),
+    ("apc_recording", "recorder"),
     ("apc_feedforward", "feedforward_node"),
     ("apc_feedback", "feedback_node"),
     ("apc_feedback", "robot_node"),
@@ -68,14 +69,6 @@ _SOURCED = (
 START_TIMEOUT_S = 30.0
 RUN_S = 2.0
 STOP_TIMEOUT_S = 2.0
-
-
-def _analyze_available() -> bool:
-    """``apc_plant_sim.analyze`` may not be written yet; its script is checked only if it is."""
-    try:
-        return importlib.util.find_spec("apc_plant_sim.analyze") is not None
-    except ImportError:
-        return False
 
 
 def _base_env() -> dict[str, str]:
@@ -189,8 +182,6 @@ def test_config_link_in_source_package():
 )
 def test_executable_installed(workspace, pkg, exe):
     """Where ``ros2 run <pkg> <exe>`` looks, and as a console script in the venv."""
-    if exe == "analyze" and not _analyze_available():
-        pytest.skip("apc_plant_sim.analyze is not importable (not written yet)")
     for path in (workspace.executable(pkg, exe), VENV_BIN / exe):
         assert path.is_file(), f"missing: {path}"
         assert os.access(path, os.X_OK), f"not executable: {path}"
@@ -276,15 +267,15 @@ def test_experiment_runs_from_the_install_without_the_source_tree(workspace, ros
     """``experiment --case a`` from a directory outside the checkout, with apc imported from
     the install: the scenario's URDF and reference numbers come from share/apc_core/config
     (a checkout's ``config/`` is not where an install looks), the run is recorded."""
-    probe = "import apc_plant_sim.scenario as s; print(s.__file__); print(s.CONFIG_DIR)"
+    probe = "import apc_lab.scenario as s; print(s.__file__); print(s.CONFIG_DIR)"
     proc = workspace.run(sys.executable, "-c", probe)
     assert proc.returncode == 0, proc.stderr
     module, config = (Path(line) for line in proc.stdout.split())
-    assert module.is_relative_to(workspace.install / "apc_plant_sim"), module
+    assert module.is_relative_to(workspace.install / "apc_lab"), module
     assert config == workspace.share("apc_core") / "config"
     out = workspace.root / "runs"
     run = workspace.run(
-        workspace.executable("apc_plant_sim", "experiment"),
+        workspace.executable("apc_lab", "experiment"),
         "--case",
         "a",
         "--hold",

@@ -4,7 +4,7 @@ on MuJoCo, sim time, a few seconds each)."""
 
 from __future__ import annotations
 
-from apc_plant_sim import robot_compare as rc
+from apc_lab import robot_compare as rc
 
 
 def test_the_panda_file_holds_then_tracks_a_move_after_the_hold(tmp_path, monkeypatch):

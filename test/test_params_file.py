@@ -20,10 +20,10 @@ from apc_core.robot import Payload, with_payload
 from apc_feedback.node import FeedbackNode
 from apc_feedback.robot_node import RobotNode
 from apc_feedforward.node import FeedforwardNode
+from apc_lab.params_file import main
+from apc_lab.reproduce import example_robot_urdf
+from apc_lab.scenario import CONFIG_DIR
 from apc_plant_sim.node import PlantNode
-from apc_plant_sim.params_file import main
-from apc_plant_sim.reproduce import example_robot_urdf
-from apc_plant_sim.scenario import CONFIG_DIR
 
 PANDA_FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
 
@@ -102,7 +102,7 @@ def test_an_existing_file_is_kept_unless_forced(tmp_path, capsys):
 
 def test_a_urdf_apc_cannot_use_stops_with_one_line(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-m", "apc_plant_sim.params_file", "--urdf", str(tmp_path / "no.urdf")],
+        [sys.executable, "-m", "apc_lab.params_file", "--urdf", str(tmp_path / "no.urdf")],
         capture_output=True,
         text=True,
         timeout=60,

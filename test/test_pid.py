@@ -11,7 +11,7 @@ from apc_core.robot import load_robot
 from apc_feedback.baselines import PID, PidGains
 from apc_feedback.controller import FeedbackError
 from apc_feedback.laws import make_law
-from apc_plant_sim.scenario import CONFIG_DIR, paper_scenario, run_offline
+from apc_lab.scenario import CONFIG_DIR, paper_scenario, run_offline
 
 
 @pytest.fixture(scope="module")

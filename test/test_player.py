@@ -17,13 +17,13 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from apc_core import wire
-from apc_core.bag import read_messages
+import apc_msgs_py as wire
 from apc_core.nodeutil import destroy_nodes
-from apc_core.player import PlayerNode, main
 from apc_feedback.node import FeedbackNode
-from apc_plant_sim.experiment import RunSpec, run_in_process
-from apc_plant_sim.scenario import paper_scenario, paper_settings
+from apc_lab.experiment import RunSpec, run_in_process
+from apc_lab.scenario import paper_scenario, paper_settings
+from apc_recording.bag import read_messages
+from apc_recording.player import PlayerNode, main
 
 pytestmark = pytest.mark.ros
 

@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from apc_plant_sim import metrics, plots, plots_beyond
-from apc_plant_sim.offline import RunResult
-from apc_plant_sim.recording import RecordedRun
-from apc_plant_sim.scenario import (
+from apc_lab import metrics, plots, plots_beyond
+from apc_lab.offline import RunResult
+from apc_lab.scenario import (
     Scenario,
     paper_scenario,
     paper_settings,
     recommended_settings,
     run_offline,
 )
+from apc_recording.runs import RecordedRun
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -12,8 +12,8 @@ from apc_core.params import ConfigError
 from apc_feedback.controller import AdaptiveConfig
 from apc_feedback.node import PARAMS, FeedbackNode
 from apc_feedback.presets import DEFAULT_PRESET, PRESETS, law_params
-from apc_plant_sim.experiment import RunSpec, build_parser, law_parameters, spec_from_args
-from apc_plant_sim.scenario import (
+from apc_lab.experiment import RunSpec, build_parser, law_parameters, spec_from_args
+from apc_lab.scenario import (
     CONFIG_DIR,
     paper_scenario,
     paper_settings,

@@ -12,7 +12,7 @@ import json
 
 import pytest
 
-from apc_plant_sim import reproduce
+from apc_lab import reproduce
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -9,14 +9,15 @@ import yaml
 from rclpy.serialization import serialize_message
 from rosbags.typesys import Stores, get_typestore
 
-from apc_core import bag, wire
-from apc_core.bag import BagWriter
+import apc_msgs_py as wire
 from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.trajectory import Waypoints
-from apc_plant_sim import robot_compare as rc
-from apc_plant_sim import robot_report
+from apc_lab import robot_compare as rc
+from apc_lab import robot_report
 from apc_plant_sim.effects import puma560_effects
-from apc_plant_sim.recording import load_robot_run
+from apc_recording import bag
+from apc_recording.bag import BagWriter
+from apc_recording.runs import load_robot_run
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 T_NS = 10_000_000

@@ -11,13 +11,13 @@ import pytest
 from scripted_plan import HOLD_U_N, ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
-from apc_core.wire import JointSample, TrajectoryGoal
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.robot_loop import NOTHING, CommandMap, RobotLoop
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedforward.nominal import Setpoint
-from apc_plant_sim.robot_offline import Latency, run_robot_loop
-from apc_plant_sim.scenario import recommended_settings
+from apc_lab.robot_offline import Latency, run_robot_loop
+from apc_lab.scenario import recommended_settings
+from apc_msgs_py import JointSample, TrajectoryGoal
 
 MS = 1_000_000
 T = 10 * MS
@@ -228,7 +228,7 @@ def test_deactivate_returns_the_gravity_hold_and_silences_the_loop():
     assert loop.tick(t + 10 * T) == NOTHING
 
 
-# -- the loop closed offline (apc_plant_sim.robot_offline) -----------------------------------------
+# -- the loop closed offline (apc_lab.robot_offline) -----------------------------------------
 def test_closed_loop_holds_without_jump_or_sag_under_an_unknown_payload():
     run = run_robot_loop(1.5)
     q0, q = run.q0, run.q

@@ -34,11 +34,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, Payload, load_robot, with_payload
-from apc_plant_sim.experiment import stop_processes
+from apc_lab.experiment import stop_processes
+from apc_lab.scenario import CONFIG_DIR
 from apc_plant_sim.plant import Plant, PlantConfig
-from apc_plant_sim.scenario import CONFIG_DIR
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_core.wire import JointSample
 from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
@@ -16,6 +15,7 @@ from apc_feedback.robot_sampling import (
     VelocityEstimator,
 )
 from apc_feedback.sampling import JointStateSampler
+from apc_msgs_py import JointSample
 
 MS = 1_000_000
 T = 10 * MS

@@ -25,10 +25,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG
-from apc_plant_sim.experiment import stop_processes
-from apc_plant_sim.scenario import CONFIG_DIR
+from apc_lab.experiment import stop_processes
+from apc_lab.scenario import CONFIG_DIR
 
 STATE_JOINTS = ["joint_2", "finger_joint", "joint_3", "joint_1"]
 URDF_ORDER = ("joint_1", "joint_2", "joint_3")

@@ -9,7 +9,7 @@ import textwrap
 
 import pytest
 
-from apc_plant_sim.experiment import Progress
+from apc_lab.experiment import Progress
 
 pytestmark = pytest.mark.ros
 

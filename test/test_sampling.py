@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_feedback.sampling import (
     MAX_PENDING,
     RECENT_SETPOINTS,

@@ -11,7 +11,6 @@ import pytest
 from scripted_plan import ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
-from apc_core.wire import JointSample
 from apc_feedback.baselines import PD, PdGains
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop
@@ -24,7 +23,8 @@ from apc_feedback.supervisor import (
     SupervisorError,
 )
 from apc_feedforward.nominal import Setpoint
-from apc_plant_sim.robot_offline import Latency, run_robot_loop
+from apc_lab.robot_offline import Latency, run_robot_loop
+from apc_msgs_py import JointSample
 
 T = 0.01
 GOAL_DEG = PAPER_GOAL_DEG
@@ -207,7 +207,7 @@ def test_a_path_tolerance_abort_hands_the_hold_to_the_fallback_if_the_law_is_uns
     assert state(103, 0.05).command == pytest.approx([kp * 0.05, kp * 0.05])
 
 
-# -- the loop closed offline (apc_plant_sim.robot_offline) ----------------------------------------
+# -- the loop closed offline (apc_lab.robot_offline) ----------------------------------------
 def test_the_supervisor_never_fires_on_a_clean_move_or_hold_and_changes_nothing():
     for goal in (GOAL_DEG, None):
         plain = run_robot_loop(2.0, goal_deg=goal)

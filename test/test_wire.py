@@ -19,8 +19,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from apc_core import wire
-from apc_core.wire import WireError
+import apc_msgs_py as wire
+from apc_msgs_py import WireError
 
 NAMES = ["j1", "j2", "j3"]
 PERM = [2, 0, 1]  # message order: j3, j1, j2

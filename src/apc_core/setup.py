@@ -39,15 +39,8 @@ setup(
     maintainer="apc maintainers",
     maintainer_email="apc-maintainers@example.org",
     description=(
-        "The shared contract of apc: topic names, QoS, message conversion and validation,"
-        " robot models, config, rosbag2-compatible MCAP recording and playback."
+        "What every apc node needs: robot models and their config files, parameters and"
+        " their defaults, the node runtime (executors, signals, diagnostics)."
     ),
     license="Apache-2.0",
-    entry_points={
-        "console_scripts": [
-            "recorder = apc_core.recorder:main",
-            "player = apc_core.player:main",
-            "bag_recover = apc_core.bag.recovery:main",
-        ],
-    },
 )

@@ -15,18 +15,14 @@ setup(
     maintainer="apc maintainers",
     maintainer_email="apc-maintainers@example.org",
     description=(
-        "Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and"
-        " plots for apc."
+        "apc's simulated arms: the plant (Lagrange-Euler, RK4) behind plant_node and a"
+        " ros2_control-style robot (apc's plant or MuJoCo) behind robot_sim."
     ),
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
             "plant_node = apc_plant_sim.node:main",
             "robot_sim = apc_plant_sim.robot_sim:main",
-            "arm = apc_plant_sim.arm:main",
-            "experiment = apc_plant_sim.experiment:main",
-            "analyze = apc_plant_sim.analyze:main",
-            "apc_params = apc_plant_sim.params_file:main",
         ],
     },
 )

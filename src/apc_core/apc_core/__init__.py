@@ -1,3 +1,2 @@
-"""The shared contract of apc: topic names, QoS, message conversion and validation, robot models,
-config, rosbag2-compatible MCAP recording and playback.
-"""
+"""What every apc node needs: robot models and their config files, parameters and their
+defaults, the node runtime (executors, signals, diagnostics)."""

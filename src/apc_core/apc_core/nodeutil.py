@@ -35,7 +35,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.config_files import resolve_config_path
 from apc_core.defaults import derive
 from apc_core.params import ConfigError, Param
@@ -48,7 +48,7 @@ from apc_core.robot import (
     read_urdf,
     with_inertia_error,
 )
-from apc_core.wire import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
+from apc_msgs_py import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
 
 ROBOT_PARAMS: tuple[Param, ...] = (
     Param(

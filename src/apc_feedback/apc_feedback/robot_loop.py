@@ -67,12 +67,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from apc_core.wire import JointSample, TrajectoryGoal
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue
 from apc_feedforward.nominal import Setpoint
+from apc_msgs_py import JointSample, TrajectoryGoal
 
 
 class CommandMap:
@@ -414,7 +414,7 @@ class RobotLoop:
         over, is idle while the fallback commands: its first sample at the hand-back starts it
         from Eq. 33 there. Identifying from the fallback's hold instead (its applied torques)
         made the law re-trip within a few samples of every hand-back
-        (``apc_plant_sim.robot_offline``, G forced wrong on a clean hold).
+        (``apc_lab.robot_offline``, G forced wrong on a clean hold).
         """
         supervisor, k = self.supervisor, args[0]
         error, error_qd = args[1] - args[3], args[2] - args[4]

@@ -64,7 +64,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.nodeutil import (
     CONTROLLER_ROBOT_PARAMS,
     Diagnostics,

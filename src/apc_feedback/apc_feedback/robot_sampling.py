@@ -57,7 +57,7 @@ import numpy as np
 
 from apc_core.params import SettingError, check_settings, setting
 from apc_core.robot import PAPER_PERIOD_S
-from apc_core.wire import JointSample, WireError, seconds_to_ns
+from apc_msgs_py import JointSample, WireError, seconds_to_ns
 
 
 class StateRejectedError(WireError):

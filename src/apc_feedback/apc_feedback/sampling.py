@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from apc_core import wire
+import apc_msgs_py as wire
 
 #: Samples waiting for their other half; beyond this the oldest is dropped (bounded memory).
 MAX_PENDING = 100
@@ -34,7 +34,7 @@ RECENT_SETPOINTS = wire.MAX_LOOKAHEAD + 2
 class JointStateSampler(Protocol):
     """Where the feedback's samples come from: joint states in, samples on the grid out.
 
-    A sample is a :class:`apc_core.wire.JointSample` stamped ``kT`` (``T`` the period in ns,
+    A sample is a :class:`apc_msgs_py.JointSample` stamped ``kT`` (``T`` the period in ns,
     ``k >= 0`` its index); the node hands every sample to the :class:`SamplePairer`, which
     pairs it with the set point of the same stamp. Implementations are plain classes told the
     node's time ``now_ns`` (the node's clock, which honours ``use_sim_time``), never reading
@@ -50,7 +50,7 @@ class JointStateSampler(Protocol):
       old the state was is the sampler's to measure and expose for diagnostics.
 
     A state that cannot be a sample (off the grid, negative, older than allowed, a duplicate
-    or out of order) raises :class:`apc_core.wire.WireError` from :meth:`offer` with the
+    or out of order) raises :class:`apc_msgs_py.WireError` from :meth:`offer` with the
     reason; the node counts and logs it as ``rejected.joint_states``, like a malformed message.
     """
 

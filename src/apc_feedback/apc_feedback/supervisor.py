@@ -39,9 +39,9 @@ know a payload and holds it with a steady offset (computed torque on the Panda's
 (:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips, so
 identification restarts from Eq. 33.
 
-Defaults, measured with robot mode's loop closed offline (``apc_plant_sim.robot_offline``: the
+Defaults, measured with robot mode's loop closed offline (``apc_lab.robot_offline``: the
 3-joint PUMA 560, 10 % inertia error, 5 lb the controllers do not know) and through robot_sim
-(``apc_plant_sim.robot_compare``, the PUMA and the Panda, ideal and with every effect on):
+(``apc_lab.robot_compare``, the PUMA and the Panda, ideal and with every effect on):
 
 - tracking error: the recommended preset's clean runs reach 1.4 deg (PUMA, every effect on);
   bound 0.05 rad (2.9 deg), suspicion 0.03 rad (1.7 deg);

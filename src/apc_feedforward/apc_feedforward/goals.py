@@ -20,7 +20,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 import pinocchio as pin
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.params import ConfigError, Param
 from apc_core.robot import Robot
 from apc_feedforward.four_three_four import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, FourThreeFour

@@ -33,7 +33,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.nodeutil import (
     CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
@@ -68,7 +68,7 @@ class FeedforwardNode(Node):
     Parameters
     ----------
     qos : QoSProfile
-        Profile of the control-loop topics (default :data:`apc_core.wire.CONTROL_QOS`).
+        Profile of the control-loop topics (default :data:`apc_msgs_py.CONTROL_QOS`).
     kwargs :
         Passed to ``rclpy.node.Node`` (namespace, parameter_overrides, ...).
     """

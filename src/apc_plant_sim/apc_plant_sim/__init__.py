@@ -1,3 +1,2 @@
-"""Simulated arm (Lagrange-Euler, RK4), launch-free experiment runner, analysis and plots
-for apc.
-"""
+"""apc's simulated arms: the plant (Lagrange-Euler, RK4) behind plant_node and a ros2_control-style
+robot (apc's plant or MuJoCo) behind robot_sim. It imports no controller."""

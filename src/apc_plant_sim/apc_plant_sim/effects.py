@@ -1,7 +1,7 @@
 """What a physical arm adds to apc's plant, for offline measurement (no ROS).
 
 :class:`PhysicalArm` wraps :class:`apc_plant_sim.plant.Plant` and offers the interface
-:func:`apc_plant_sim.offline.run_closed_loop` uses (``q``, ``qd``, ``k``, ``step``, ``limit``,
+:func:`apc_lab.offline.run_closed_loop` uses (``q``, ``qd``, ``k``, ``step``, ``limit``,
 ``set_robot``), so the same loop runs the ideal arm or one with any of these effects, each a
 field of :class:`ArmEffects` and off by default:
 

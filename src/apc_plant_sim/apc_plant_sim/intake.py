@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.params import Param
 
 #: The plant node's parameter of the real-time watchdog.
@@ -126,9 +126,9 @@ class TorqueIntake:
     def take(self, source: Source, stamp_ns: int, effort: np.ndarray, k: int) -> Filed:
         """File a torque stamped ``stamp_ns`` while the plant is at sample ``k``.
 
-        Rejected (raises :class:`~apc_core.wire.WireError`): a stamp that is negative, off the
+        Rejected (raises :class:`~apc_msgs_py.WireError`): a stamp that is negative, off the
         sample grid, ahead of the current sample (a nominal torque: more than
-        :data:`~apc_core.wire.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
+        :data:`~apc_msgs_py.MAX_LOOKAHEAD` samples ahead), or any torque before the plant
         sent sample 0 -- no controller can have computed it. Ignored: older than the newest
         torque taken for a sample that has come (OUT_OF_ORDER); in lockstep, an answer to a
         sample already integrated (STALE, e.g. to a resend) and a second torque for a sample

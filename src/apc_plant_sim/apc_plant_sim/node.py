@@ -41,7 +41,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,

@@ -52,7 +52,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from apc_core import wire
+import apc_msgs_py as wire
 from apc_core.nodeutil import (
     ROBOT_PARAMS,
     Diagnostics,

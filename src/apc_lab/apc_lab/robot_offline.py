@@ -1,0 +1,236 @@
+"""Robot mode's loop closed offline: a driver on its own clock, the controllers on theirs, no ROS.
+
+What :mod:`apc_lab.offline` is for the lockstep wire, this is for robot mode: apc's plant
+stepped by a driver every ``driver_ms`` (it reports positions only, stamped with its time),
+:class:`apc_feedback.robot_loop.RobotLoop` offered each state ``transport_ms`` after its stamp
+(the trip to the controllers and their wake-up) and taking its samples from them, its
+watchdog checked every T, the loop sampling the feedforward's plan itself, all on one synthetic
+clock. A command leaves when its state arrives
+and reaches the driver at its first cycle after that, plus a latency that :class:`Latency`
+chooses per command: the delay a drive or a network adds, on time or late. The 3-joint PUMA
+560 with 10 % inertia error in the controllers and a payload they do not know. Used by
+``test/test_robot_loop.py`` and ``bench/late_commands.py``.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from apc_core.robot import PAPER_START_DEG, Payload, load_robot, with_inertia_error, with_payload
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+from apc_feedback.presets import recommended_settings
+from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
+from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
+from apc_feedforward.four_three_four import FourThreeFour
+from apc_feedforward.goals import GoalQueue
+from apc_lab.scenario import CONFIG_DIR
+from apc_msgs_py import JointSample
+from apc_plant_sim.plant import Plant, PlantConfig, PlantError
+
+MS = 1_000_000  # ns
+
+
+@dataclass
+class Latency:
+    """How late each command reaches the driver beyond its next cycle (ms).
+
+    ``fixed_ms`` for every command; ``late_ms`` more for the first ``first`` commands, and for
+    each later one with probability ``probability`` (``seed`` fixes the draws).
+    """
+
+    fixed_ms: float = 0.0
+    late_ms: float = 0.0
+    first: int = 0
+    probability: float = 0.0
+    seed: int = 0
+    _count: int = field(default=0, init=False)
+    _rng: Any = field(default=None, init=False)
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+
+    def next_ns(self) -> int:
+        """The latency of the next command (ns)."""
+        self._count += 1
+        late = self._count <= self.first or (
+            self.probability > 0.0 and self._rng.random() < self.probability
+        )
+        return round((self.fixed_ms + (self.late_ms if late else 0.0)) * MS)
+
+
+@dataclass
+class RobotRun:
+    """One run: the start position; per driver cycle (time ns, q), with the set point's q
+    appended for the cycles whose state was a sample; the loop's timing figures at the end
+    (:meth:`apc_feedback.robot_sampling.SampleTiming.figures`, us), its counters and its logged
+    lines ``(level, text)``."""
+
+    q0: np.ndarray
+    log: list[tuple]
+    timing: dict[str, float] = field(default_factory=dict)
+    counts: Counter = field(default_factory=Counter)
+    lines: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def q(self) -> np.ndarray:
+        return np.array([entry[1] for entry in self.log])
+
+    def max_deviation_deg(self) -> float:
+        """Largest |q - q0| over the run (a hold's sag), deg."""
+        return float(np.rad2deg(np.max(np.abs(self.q - self.q0))))
+
+    def max_tracking_error_deg(self) -> float:
+        """Largest |q - q_d| at the samples, deg."""
+        return float(max(np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in self.log if len(e) == 3))
+
+
+def run_robot_loop(
+    duration_s: float,
+    *,
+    goal_deg: Sequence[float] | None = None,
+    driver_ms: float = 2.0,
+    period_ms: float = 10.0,
+    phase_ms: float = 0.3,
+    transport_ms: float = 0.3,
+    payload_kg: float = 2.268,
+    pause: tuple[float, float] | None = None,
+    latency: Latency | None = None,
+    settings: Mapping[str, Any] | None = None,
+    supervisor: SupervisorConfig | None = None,
+    setup: Callable[[RobotLoop], object] | None = None,
+) -> RobotRun:
+    """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
+
+    Parameters
+    ----------
+    duration_s : float
+        Run time after activation (s).
+    goal_deg : sequence of float, optional
+        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 0.2 s after activation.
+    driver_ms, phase_ms : float
+        The driver's period and its cycles' phase after a multiple of T (ms).
+    period_ms : float
+        The controllers' sampling period T (ms); the preset's is 10.
+    transport_ms : float
+        From a state's stamp to its arrival at the loop (ms): its trip and the controllers'
+        wake-up; the command computed from it leaves then.
+    payload_kg : float
+        The payload at the wrist centre the controllers do not know.
+    pause : (start, end), optional
+        Seconds after activation during which the driver publishes no states.
+    latency : Latency, optional
+        When commands reach the driver beyond its first cycle after they leave (default: at it).
+    settings : mapping, optional
+        The adaptive law's settings (default: the recommended preset).
+    supervisor : SupervisorConfig, optional
+        Supervise the adaptive law, with the fallback law it names (default: unsupervised).
+    setup : callable, optional
+        ``setup(loop)`` once the loop is built, before activation: to observe the law or to
+        make it go wrong (wrap ``loop.law.update``).
+    """
+    T_NS = round(period_ms * MS)
+    T = T_NS * 1e-9
+    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
+    plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
+    q0 = np.deg2rad(PAPER_START_DEG)
+    dt = round(driver_ms * MS)
+    plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
+    data = controller.model.createData()
+    counts: Counter = Counter()
+    lines: list[tuple[str, str]] = []
+    config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
+    tolerance = np.full(3, 0.2)
+    supervision = {}
+    if supervisor is not None and supervisor.enable:
+        supervision = {
+            "supervisor": Supervisor(supervisor, 3, T),
+            "fallback": fallback_law(supervisor, controller, T),
+        }
+    loop = RobotLoop(
+        law=AdaptiveFeedback(controller.model, config),
+        sampling=RobotSamplingConfig(period=T),
+        command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
+        plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
+        gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
+        path_tolerance=tolerance,
+        count=lambda name: counts.update((name,)),
+        log=lambda level, text: lines.append((level, text)),
+        **supervision,
+    )
+    if setup is not None:
+        setup(loop)
+    latency = latency or Latency()
+    transport = round(transport_ms * MS)
+    log: list[tuple] = []
+    pending: list[tuple[int, np.ndarray]] = []  # (when the driver applies it, torque)
+    # Before activation another controller holds the arm (the true gravity torque).
+    torque = pin.computeGeneralizedGravity(plant_robot.model, plant_robot.model.createData(), q0)
+    moved = goal_deg is None
+
+    def handle(step: Step, now: int) -> None:
+        nonlocal moved
+        if step.command is not None:
+            # The driver has run its cycle at ``now`` (if one falls there): the next one applies it.
+            pending.append((now + 1 + latency.next_ns(), loop.command.to_model(step.command)))
+            pending.sort(key=lambda arrival: arrival[0])  # the newest arrival is applied
+            loop.command_published(now)
+        plan = loop.plan.feedforward
+        if not moved and plan is not None and step.setpoint is not None:
+            # The move, from the held position, starts 0.2 s after the first sample (a user's
+            # goal; a 4-3-4 as the feedforward's first move).
+            assert goal_deg is not None
+            start = step.setpoint.q
+            move = FourThreeFour(start, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
+            plan.set_trajectory(move, step.setpoint.k + round(0.2 / T))
+            moved = True
+
+    # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
+    # driver cycle comes first, then a state's arrival, then the watchdog's check; activation is
+    # the first check.
+    CYCLE, ARRIVAL, WATCHDOG = 0, 1, 2
+    t_act = 5000 * T_NS
+    end = t_act + round(duration_s * 1e9)
+    events: list[tuple[int, int, int, Any]] = [
+        (5000 * T_NS - 40 * MS + round(phase_ms * MS), CYCLE, 0, None),
+        (t_act, WATCHDOG, 1, None),
+    ]
+    order = 2
+    while events:
+        now, kind, _, payload = heapq.heappop(events)
+        if now >= end:
+            break
+        if kind == CYCLE:
+            while pending and pending[0][0] <= now:
+                torque = pending.pop(0)[1]
+            log.append((now, plant.q.copy()))
+            if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
+                state = JointSample(now, plant.q.copy(), None, None)
+                heapq.heappush(events, (now + transport, ARRIVAL, order, (len(log) - 1, state)))
+                order += 1
+            try:
+                plant.step(torque)
+            except PlantError:  # the arm is lost: the run ends here
+                break
+            heapq.heappush(events, (now + dt, CYCLE, order, None))
+        elif kind == ARRIVAL:
+            index, state = payload
+            step = loop.on_joint_state(state, now)
+            handle(step, now)
+            if step.setpoint is not None:
+                log[index] = (*log[index][:2], step.setpoint.q)
+        else:
+            if not loop.active:
+                loop.activate()
+            handle(loop.tick(now), now)
+            heapq.heappush(events, (now + T_NS, WATCHDOG, order, None))
+        order += 1
+    return RobotRun(q0, log, loop.timing.figures(), counts, lines)
