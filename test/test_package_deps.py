@@ -36,6 +36,9 @@ KEYS = {
     "mcap": "python3-mcap-pip",
     "zstandard": "python3-zstandard-pip",
     "mujoco": "python3-mujoco-pip",
+    "pytest": "python3-pytest",
+    "rosbags": "python3-rosbags-pip",
+    "mcap_ros2": "python3-mcap-ros2-support-pip",
 }
 #: ROS packages imported by name (their rosdep key is the package name).
 ROS_PACKAGES = {
@@ -54,10 +57,11 @@ ROS_PACKAGES = {
 IMPLIED = {"rclpy.lifecycle": "lifecycle_msgs"}
 
 
-def _imports(package: str) -> set[str]:
-    """Top-level modules (and the implied ones) imported anywhere in ``package``'s code."""
+def _imports(package: str, part: str | None = None) -> set[str]:
+    """Top-level modules (and the implied ones) imported anywhere in ``package``'s code, or in
+    its ``part`` (``"test"``: its unit tests)."""
     found: set[str] = set()
-    for path in (REPO / "src" / package / package).rglob("*.py"):
+    for path in (REPO / "src" / package / (part or package)).rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             names: list[str] = []
             if isinstance(node, ast.Import):
@@ -70,28 +74,43 @@ def _imports(package: str) -> set[str]:
     return found
 
 
-def _declared(package: str) -> set[str]:
+def _declared(package: str, tags: tuple[str, ...] = ("depend", "exec_depend")) -> set[str]:
     root = ET.parse(REPO / "src" / package / "package.xml").getroot()
-    return {e.text for tag in ("depend", "exec_depend") for e in root.iter(tag) if e.text}
+    return {e.text for tag in tags for e in root.iter(tag) if e.text}
 
 
-@pytest.mark.parametrize("package", PACKAGES)
-def test_package_xml_declares_every_import(package):
+def _keys(package: str, modules: set[str]) -> set[str]:
+    """The rosdep keys of ``modules`` (apc's own and the standard library's left out)."""
     needed = set()
-    for module in _imports(package) - set(sys.stdlib_module_names) - {package}:
+    for module in modules - set(sys.stdlib_module_names) - {package}:
         if module in KEYS:
             needed.add(KEYS[module])
         elif module in ROS_PACKAGES or module in PACKAGES:
             needed.add(module)
         else:
             pytest.fail(f"{package} imports {module!r}: give it a rosdep key in this test")
-    missing = needed - _declared(package)
+    return needed
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_package_xml_declares_every_import(package):
+    missing = _keys(package, _imports(package)) - _declared(package)
     assert not missing, f"{package}/package.xml lacks {sorted(missing)}"
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_package_xml_declares_what_its_unit_tests_import(package):
+    """``colcon test`` runs ``src/<pkg>/test``: what it imports is a dependency or a
+    ``test_depend``."""
+    needed = _keys(package, _imports(package, "test"))
+    missing = needed - _declared(package, ("depend", "exec_depend", "test_depend"))
+    assert not missing, f"{package}/package.xml lacks test_depend {sorted(missing)}"
 
 
 def test_the_pip_keys_are_defined_for_rosdep():
     defined = yaml.safe_load((REPO / "rosdep" / "apc.yaml").read_text())
-    used = {k for p in PACKAGES for k in _declared(p) if k.endswith("-pip")}
+    tags = ("depend", "exec_depend", "test_depend")
+    used = {k for p in PACKAGES for k in _declared(p, tags) if k.endswith("-pip")}
     assert used <= set(defined)
     for key in used:
         assert set(defined[key]) == {"debian", "ubuntu"}, key
@@ -114,5 +133,6 @@ MAY_USE = {
 def test_dependencies_point_one_way(package):
     """No package uses one above it: the simulated arms import no controller, a robot install
     (robot_node) pulls in neither the simulator nor the lab."""
-    used = (_declared(package) | _imports(package)) & set(PACKAGES) - {package}
+    used = _declared(package) | _imports(package) | _imports(package, "test")
+    used &= set(PACKAGES) - {package}
     assert used <= MAY_USE[package], f"{package} uses {sorted(used - MAY_USE[package])}"

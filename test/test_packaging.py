@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -27,6 +28,15 @@ REPO = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
 VENV_BIN = VENV / "bin"
 
+PACKAGES = (
+    "apc_msgs_py",
+    "apc_core",
+    "apc_recording",
+    "apc_feedforward",
+    "apc_feedback",
+    "apc_plant_sim",
+    "apc_lab",
+)
 EXECUTABLES: dict[str, tuple[str, ...]] = {
     "apc_recording": ("recorder", "player", "bag_recover"),
     "apc_feedforward": ("feedforward_node",),
@@ -89,6 +99,7 @@ class Workspace:
         self.root = root
         self.install = root / "install"
         self.build_s = build_s
+        self.colcon_home = root / "colcon_home"
         self.scratch = root / "cwd"  # a working directory outside the repository
         self.scratch.mkdir()
 
@@ -131,7 +142,7 @@ class Workspace:
 def _new_artefacts() -> set[Path]:
     """What a build that writes into the source tree would leave there."""
     found: set[Path] = set()
-    for pkg in EXECUTABLES:
+    for pkg in PACKAGES:
         src = REPO / "src" / pkg
         found |= set(src.glob("*.egg-info")) | {p for p in (src / "build",) if p.exists()}
     return found
@@ -165,10 +176,50 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workspace]:
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, f"colcon build failed ({proc.returncode}):\n{output[-6000:]}"
     print(f"colcon build: {build_s:.1f} s")
-    for pkg in EXECUTABLES:
+    for pkg in PACKAGES:
         assert f"Finished <<< {pkg}" in output, f"colcon did not build {pkg}:\n{output[-3000:]}"
     assert _new_artefacts() == before, "colcon build wrote into the source tree"
     yield Workspace(root, build_s)
+
+
+def test_colcon_test_runs_every_package_unit_tests(workspace):
+    """``colcon test`` runs each package's own tests (``src/<pkg>/test``, pytest) against the
+    install, and every one passes."""
+    results = workspace.root / "test_results"
+    before = _new_artefacts()
+    env = _base_env()
+    env["COLCON_HOME"] = str(workspace.colcon_home)
+    argv = [
+        str(VENV_BIN / "colcon"),
+        "--log-base",
+        str(workspace.root / "log"),
+        "test",
+        "--base-paths",
+        str(REPO / "src"),
+        "--build-base",
+        str(workspace.root / "build"),
+        "--install-base",
+        str(workspace.install),
+        "--test-result-base",
+        str(results),
+        "--pytest-args",
+        "-p",
+        "no:cacheprovider",
+    ]
+    proc = subprocess.run(
+        argv, cwd=workspace.root, env=env, capture_output=True, text=True, timeout=600
+    )
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == 0, f"colcon test failed ({proc.returncode}):\n{output[-6000:]}"
+    for pkg in PACKAGES:
+        report = results / pkg / "pytest.xml"
+        assert report.is_file(), f"colcon test ran no pytest for {pkg}:\n{output[-3000:]}"
+        suite = ET.parse(report).getroot()
+        suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
+        counts = {k: int(suite.get(k, "0")) for k in ("tests", "failures", "errors")}
+        assert counts["tests"] > 0, f"{pkg} has no unit tests"
+        assert counts["failures"] == counts["errors"] == 0, f"{pkg}: {counts}"
+    assert _new_artefacts() == before, "colcon test wrote into the source tree"
 
 
 def test_config_link_in_source_package():

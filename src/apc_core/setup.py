@@ -35,6 +35,7 @@ setup(
         ("share/" + package_name + "/config/reference", _config_files("config/reference/*.json")),
     ],
     install_requires=["setuptools"],
+    extras_require={"test": ["pytest"]},
     zip_safe=True,
     maintainer="apc maintainers",
     maintainer_email="apc-maintainers@example.org",

@@ -16,6 +16,7 @@ import pinocchio as pin
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from apc_core.config_files import config_dir
 from apc_core.robot import (
     PAPER_MAX_PAYLOAD_KG,
     Payload,
@@ -26,10 +27,10 @@ from apc_core.robot import (
     with_payload,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-URDF_3 = ROOT / "config" / "puma560_3dof.urdf"
-URDF_6 = ROOT / "config" / "puma560.urdf"
-REFERENCE = json.loads((ROOT / "config" / "reference" / "puma560.json").read_text())
+CONFIG = config_dir()
+URDF_3 = CONFIG / "puma560_3dof.urdf"
+URDF_6 = CONFIG / "puma560.urdf"
+REFERENCE = json.loads((CONFIG / "reference" / "puma560.json").read_text())
 DH_ROWS = REFERENCE["joints"]
 G = 9.8062  # m/s^2, the paper's gravity and the loader's default
 D4 = 0.4318  # m, wrist centre along z3

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from apc_core.config_files import config_dir
 from apc_core.params import ConfigError
 from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
@@ -15,14 +16,13 @@ from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackEr
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import one_step_control
-from apc_lab.scenario import CONFIG_DIR
 
 rng = np.random.default_rng(7)
 
 
 @pytest.fixture(scope="module")
 def controller_robot():
-    return with_inertia_error(load_robot(CONFIG_DIR / "puma560_3dof.urdf"), [0.1, -0.1, 0.1])
+    return with_inertia_error(load_robot(config_dir() / "puma560_3dof.urdf"), [0.1, -0.1, 0.1])
 
 
 def _random_sample(n=3):
@@ -130,7 +130,7 @@ def _regulate(robot, truth, w, q_position, q_velocity, samples=300):
 
 def test_adaptive_regulates_a_linear_perturbation_system(controller_robot):
     """The law starts from the wrong model (+-10 % inertia) and still drives dx to ~0."""
-    truth = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    truth = load_robot(config_dir() / "puma560_3dof.urdf")
     dx = _regulate(controller_robot, truth, np.zeros(6), q_position=1e4, q_velocity=1.0)
     assert np.abs(dx[:3]).max() < np.deg2rad(1e-4)
 
@@ -143,7 +143,7 @@ def test_one_step_law_leaves_an_offset_under_a_constant_bias(controller_robot):
     velocity/position weight ratio. With the paper's Q = 0.1 I (ratio 1) it is w_v / T, which
     is why the printed settings let a payload's gravity build up as position error.
     """
-    truth = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    truth = load_robot(config_dir() / "puma560_3dof.urdf")
     w = np.concatenate([np.zeros(3), [0.0, -0.02, 0.05]])
     offsets = [
         np.abs(_regulate(controller_robot, truth, w, q_position=qp, q_velocity=1.0)[:3]).max()
@@ -200,7 +200,7 @@ def test_make_law_by_name(controller_robot, kind, cls):
 
 
 def test_make_law_rejects_unknown():
-    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    robot = load_robot(config_dir() / "puma560_3dof.urdf")
     with pytest.raises(FeedbackError, match="controller must be one of"):
         make_law("lqr", robot, 0.01)
     with pytest.raises(FeedbackError, match="unknown gain parameter 'kd'"):

@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -19,6 +18,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.integrate import solve_ivp
 
+from apc_core.config_files import config_dir
 from apc_core.robot import (
     PAPER_MAX_PAYLOAD_KG,
     PAPER_START_DEG,
@@ -30,9 +30,9 @@ from apc_core.robot import (
 from apc_feedforward.nominal import nominal_torque
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError, PlantStep
 
-ROOT = Path(__file__).resolve().parents[1]
-URDF_3 = ROOT / "config" / "puma560_3dof.urdf"
-URDF_6 = ROOT / "config" / "puma560.urdf"
+CONFIG = config_dir()
+URDF_3 = CONFIG / "puma560_3dof.urdf"
+URDF_6 = CONFIG / "puma560.urdf"
 G = 9.8062  # m/s^2
 
 # A state away from any symmetry, for the 3-dof arm (DH angles).

@@ -4,13 +4,12 @@ the real-time watchdog (nominal only, brake, release) counted in samples; and Pl
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
 import apc_msgs_py as wire
+from apc_core.config_files import config_dir
 from apc_core.robot import load_robot
 from apc_plant_sim.intake import Action, Filed, Source, TorqueIntake
 from apc_plant_sim.plant import Plant, PlantConfig
@@ -200,7 +199,7 @@ def test_a_zero_watchdog_needs_the_torques_of_the_sample_itself():
 
 
 def test_plant_brake_holds_the_position_and_counts_the_sample():
-    robot = load_robot(Path(__file__).resolve().parents[1] / "config" / "puma560_3dof.urdf")
+    robot = load_robot(config_dir() / "puma560_3dof.urdf")
     plant = Plant(robot, PlantConfig(period=0.01, step=0.0025), np.deg2rad([0.0, 30.0, -60.0]))
     plant.step(np.zeros(N))
     q = plant.q.copy()

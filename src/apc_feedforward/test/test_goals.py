@@ -5,20 +5,19 @@ which samples answer which joint state (ahead, resend, stale)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
 import apc_msgs_py as wire
+from apc_core.config_files import config_dir
 from apc_core.robot import load_robot
 from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import MAX_QUEUED_GOALS, GoalQueue, Lookahead
 from apc_feedforward.nominal import Feedforward, Setpoint
 from apc_feedforward.trajectory import TrajectoryError, Waypoints
 
-URDF = Path(__file__).resolve().parents[1] / "config" / "puma560_3dof.urdf"
+URDF = config_dir() / "puma560_3dof.urdf"
 T = 0.01
 MOVE = dict(segment_times=(0.2, 0.6, 0.2), lift_off=0.1, set_down=0.9)
 Q0 = np.deg2rad([10.0, 20.0, -30.0])
