@@ -304,6 +304,7 @@ class RobotLoop:
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
+            self.supervisor.expect_command_delay(driver_period)
         if self._replan:
             self._drop_plan(k)
         self._restart = self._replan = False
@@ -447,6 +448,18 @@ class RobotLoop:
         assert self.fallback is not None
         self.law.reset()
         self.count("supervisor.handovers")
+        supervisor = self.supervisor
+        assert supervisor is not None
+        if supervisor.latched:
+            self.count("supervisor.latched")
+            self.log(
+                "error",
+                f"sample {k}: {why}; the adaptive law lost the joints again after each of its "
+                f"last {supervisor.config.failed_handbacks} hand-backs: the "
+                f"{self.fallback.kind} fallback keeps them (latched) until the node is "
+                "configured again",
+            )
+            return
         self.log(
             "warn",
             f"sample {k}: {why}; the {self.fallback.kind} fallback commands the joints, the "

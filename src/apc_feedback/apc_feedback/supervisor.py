@@ -9,7 +9,12 @@ bounded on every arm measured), on the first of these triggers, each named:
 - ``tracking_error``: ``|q - q_d|`` on a joint beyond ``error_bound`` *and* larger than it
   was ``error_growth_samples`` samples before, its rate ``|qd - qd_d|`` not smaller: an error
   growing, not a constant offset nor an arm being brought to rest (a hold started on an arm
-  still sagging after a watchdog gap overshoots 2 deg while the law stops it). One
+  still sagging after a watchdog gap overshoots 2 deg while the law stops it). The error is
+  judged when a command computed now can act: ``error_lead`` (2) driver periods ahead at its
+  rate, ``|q - q_d + lead (qd - qd_d)|``, once the loop has told the driver period
+  (:meth:`Supervisor.expect_command_delay`): the fallback's first command acts that much
+  later, and a law diverging on a slow driver with a late command has the joint moving fast by
+  the time the error shows (docs/robot.md, "Never lose the arm"). One
   bound for holds and moves, not a fraction of the path tolerance: a tolerance set tight on
   purpose (to abort a goal the arm cannot follow) would make it fire on a law that is fine;
   a joint beyond its path tolerance while moving hands over anyway (the loop's abort);
@@ -26,42 +31,26 @@ bounded on every arm measured), on the first of these triggers, each named:
   samples in a row, with some joint beyond ``suspicion_error``.
 
 A residual, a clipped command or a model passing through an odd region while the arm is on its
-path is no loss of it: on physical arms through robot_sim (rotor inertia, quantised positions,
-a drive's delay) the adaptive law tracking within 1.4 deg clipped for 5 samples at a move's
-start, made a residual jump and took Ĝ's diagonal to 3 % of Eq. 33's, and computed torque
-holding instead cost 7 deg. So those wait for the error.
+path is no loss of it (a physical arm's move start does all three while the law tracks, and the
+fallback in its place costs more), so those wait for the error.
+
+A law that loses the arm again after each hand-back is not handed it any more: after
+``failed_handbacks`` (2) hand-backs in a row each followed by a hand-over within 20 settle times,
+the fallback keeps the joints (``latched``) until the node is configured again (a new
+supervisor): a law that cannot hold this arm on this driver (a 100 Hz driver with every command
+a period late) would otherwise be handed it again and again, each time costing an excursion.
 
 While the fallback is in charge the supervisor waits for the error to settle (every joint
 within ``settle_error`` and moving off its set point no faster than ``settle_rate``, for
 ``settle_time``) and then hands the joints back. Settled, not small: the fallback does not
-know a payload and holds it with a steady offset (computed torque on the Panda's wrist under
-5 lb: 2.6 deg), which the adaptive law, once back, removes. The caller
-(:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips, so
-identification restarts from Eq. 33.
+know a payload and holds it with a steady offset, which the adaptive law, once back, removes.
+The caller (:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips,
+so identification restarts from Eq. 33.
 
-Defaults, measured with robot mode's loop closed offline (``apc_lab.robot_offline``: the
-3-joint PUMA 560, 10 % inertia error, 5 lb the controllers do not know) and through robot_sim
-(``apc_lab.robot_compare``, the PUMA and the Panda, ideal and with every effect on):
-
-- tracking error: the recommended preset's clean runs reach 1.4 deg (PUMA, every effect on);
-  bound 0.05 rad (2.9 deg), suspicion 0.03 rad (1.7 deg);
-- input gain: clean offline runs keep each diagonal ratio within 0.24-1.005; through robot_sim
-  with every effect on it passes 0.03 and the relative eigenvalue -0.12 while tracking; a
-  flipped Ĝ is -1 at once: bounds 0.05 (off path), 2, the wrong sign, -0.25 (off path);
-- residual: clean runs reach 0.22, lost ones 5.9-37: floor 2, factor 10;
-- saturation: lost arms clip every sample from the 5th-7th: 5 samples.
-
-The fallback: computed torque, the one law bounded on every arm of the robot comparison (the
-docs/paper.md, "Through the robot interface": the tuned PID oscillates on the Panda, 86 deg), with
-``Kp = 900``, ``Kv = 60`` (a double pole at -30 rad/s): with the paper's 100 / 20 it holds the
-PUMA 16.5 deg off under the payload it does not know, with 900 / 60 1.7 deg, with 2500 / 100
-the 10 ms driver's lag costs 4.7 deg. Supervised, every lost run above stays within 3.1 deg
-(the PID fallback: 3.8 deg on the 4 ms driver's move). Hand-back once every joint is within
-0.1 rad (5.7 deg) and slower than 0.02 rad/s off its set point for 0.5 s: a steady fallback,
-whatever its offset (computed torque's sag under a payload it does not know: 1.7 deg on the
-PUMA, 2.6 deg on the Panda's wrist, where a bound of 2 deg kept the fallback in charge for
-good on wall time), so the adaptive law takes the arm back and removes the sag (after a
-hand-over forced on a clean hold: 0.000 deg at the end).
+The fallback is computed torque, the one law bounded on every arm of the robot comparison, with
+a double pole at -30 rad/s (``Kp = 900``, ``Kv = 60``), slowed on slow drivers
+(:func:`fallback_gains`). The defaults (bounds, factors, gains) and the runs that chose them are
+in docs/robot.md, "The supervisor's defaults".
 """
 
 from __future__ import annotations
@@ -190,6 +179,20 @@ class SupervisorConfig:
         0.0,
         1e4,
     )
+    failed_handbacks: int = setting(
+        2,
+        "latch: after this many hand-backs in a row each followed by a hand-over within 20 "
+        "settle times, the fallback keeps the joints until the node is configured again",
+        1,
+        1000,
+    )
+    error_lead: float = setting(
+        2.0,
+        "tracking_error trigger: judge q - q_d + lead (qd - qd_d), the error when a fallback's "
+        "command can act, lead this many driver periods (the delay the loop tells; 0: off)",
+        0.0,
+        100.0,
+    )
 
     def __post_init__(self) -> None:
         check_settings(self, SupervisorError)
@@ -229,6 +232,8 @@ class Supervisor:
         self._settle_samples = round(config.settle_time / period)
         self._streak = 0  # hand-overs, each within 20 settle times of the hand-back before
         self._handback_k: int | None = None
+        self.latched = False  # the fallback keeps the joints for good (failed_handbacks)
+        self._lead = 0.0  # s: error_lead driver periods, once the loop tells the period
         self._decay = min(1.0, period / config.residual_window)
         self.in_charge = ADAPTIVE
         self.reason = ""  # the trigger (or "path_tolerance") of the last hand-over
@@ -274,11 +279,14 @@ class Supervisor:
             error has settled; else None.
         """
         error = np.abs(error_q)
+        ahead = np.abs(error_q + self._lead * error_qd)  # when a fallback's command can act
         if self._k_prev is not None and k != self._k_prev + 1:
             self._errors.clear()  # growth is measured over consecutive samples only
             self._clipped_run = self._settled_run = 0
         self._k_prev = k
         if self.in_charge == FALLBACK:
+            if self.latched:
+                return None
             config = self.config
             settled = (error <= config.settle_error).all() and (
                 np.abs(error_qd) <= config.settle_rate
@@ -290,7 +298,7 @@ class Supervisor:
                 self._handback_k = k
                 return "handback"
             return None
-        self._errors.append((error, np.abs(error_qd)))
+        self._errors.append((ahead, np.abs(error_qd)))
         # Every trigger sees every sample (the residual's mean and the clipped run are state);
         # a residual or a clipped run alone is no loss of the arm (a move's start, a payload's
         # jolt): they trip only with the error beyond suspicion_error.
@@ -302,6 +310,13 @@ class Supervisor:
         if trigger is not None:
             self.hand_over(trigger)
         return trigger
+
+    def expect_command_delay(self, driver_period: float) -> None:
+        """The loop's driver period (s): a command computed now acts about two of them later
+        (one with a driver that applies it at its next write, two with a drive or a network
+        that adds a cycle), so the tracking_error trigger judges the error ``error_lead``
+        driver periods ahead. Until told (a bare supervisor), the error as measured."""
+        self._lead = self.config.error_lead * max(0.0, driver_period)
 
     @property
     def dwell(self) -> float:
@@ -315,6 +330,8 @@ class Supervisor:
             self._k_prev is None or self._k_prev - self._handback_k <= 20 * self._settle_samples
         )
         self._streak = self._streak + 1 if recent else 0
+        if self._streak >= self.config.failed_handbacks:
+            self.latched = True
         self.in_charge, self.reason = FALLBACK, reason
         self._clear()
 
