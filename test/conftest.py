@@ -6,7 +6,7 @@ import os
 import random
 
 import pytest
-from rosgraph import Graph
+from support.graph import Graph
 
 # Set before any rclpy context is created (contexts read the environment at init), so tests that
 # run nodes never see another run's traffic and never leave this machine.

@@ -28,9 +28,9 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph import Graph
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from support.graph import Graph
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 import apc_msgs_py as wire

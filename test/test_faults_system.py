@@ -40,9 +40,11 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
+from support.processes import write_params
 
 import apc_msgs_py as wire
 from apc_lab.experiment import RunSpec, stop_processes
+from apc_lab.long_run import CONFIGS, POSES_DEG, Schedule, run_long
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_recording.bag import BagTruncatedWarning, bag_info, read_messages
 from apc_recording.bag.recovery import main as bag_recover
@@ -73,11 +75,6 @@ def report(what: str, **values: object) -> None:
 # ----------------------------------------------------------------------------------------------
 # Processes and the observer
 # ----------------------------------------------------------------------------------------------
-def write_params(path: Path, params: dict) -> Path:
-    path.write_text(yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}))
-    return path
-
-
 def realtime_params(case: str = "c", **plant: object) -> dict:
     """Node parameters of the paper's case for a real-time run that lasts until stopped."""
     spec = RunSpec(paper_scenario(case, hold_s=0.0), "adaptive", paper_settings())
@@ -1087,22 +1084,9 @@ def test_network_namespaces_with_delay_and_loss(tmp_path):
 # ----------------------------------------------------------------------------------------------
 # 5. Long runs (offline): bounded with the RLS guard, wind-up without it
 # ----------------------------------------------------------------------------------------------
-def _long_run_module():
-    import importlib.util
-
-    name = "apc_bench_long_run"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, REPO / "bench" / "long_run.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
 @pytest.mark.slow
 def test_long_run_stays_bounded():
-    """150 s of moves, holds (up to 20 s) and payload changes, offline (bench/long_run.py).
+    """150 s of moves, holds (up to 20 s) and payload changes, offline (apc_lab.long_run).
 
     With the guard (the default): every sample finite, trace(P) <= trace(P(0)), no refused
     update, errors bounded. The printed Q = 0.1 I cannot hold a payload against gravity (README:
@@ -1110,11 +1094,10 @@ def test_long_run_stays_bounded():
     a few degrees. Without the guard, a 20 s hold without excitation winds trace(P) up like
     rho^-k, past 1e18.
     """
-    lr = _long_run_module()
     seconds = 150.0
     bounds_deg = {"guarded": 100.0, "guarded_qpos": 6.0}  # measured: ~80 and ~2.8 (see README)
     for name, bound in bounds_deg.items():
-        r = lr.run_long(lr.CONFIGS[name], seconds, segment_s=60.0)
+        r = run_long(CONFIGS[name], seconds, segment_s=60.0)
         report(
             f"long run {name} ({seconds:g} s)",
             wall_s=r["wall_s"],
@@ -1136,7 +1119,7 @@ def test_long_run_stays_bounded():
     # refused. Whether the arm is then lost within these 150 s depends on rounding, which
     # differs between x86-64 machines running the same wheels (lost on one, a 1.1 deg worst
     # hold on another), so only the wind-up is asserted; the error is reported.
-    r = lr.run_long(lr.CONFIGS["paper_qpos"], seconds, segment_s=60.0)
+    r = run_long(CONFIGS["paper_qpos"], seconds, segment_s=60.0)
     report(
         "long run paper_qpos (no guard)",
         diverged_at_s=r["diverged_at_s"],
@@ -1147,9 +1130,9 @@ def test_long_run_stays_bounded():
     assert r["rejected_updates"] > 0 and r["max_trace_p"] > 1e12
 
     # One move and a 20 s hold without payload (no excitation), with and without the guard.
-    hold = lr.Schedule(poses_deg=lr.POSES_DEG[:2], holds_s=(20.0,), payloads_kg=(0.0,))
-    unguarded = lr.run_long(lr.CONFIGS["paper"], 20.9, schedule=hold, segment_s=5.0)
-    guarded = lr.run_long(lr.CONFIGS["guarded"], 20.9, schedule=hold, segment_s=5.0)
+    hold = Schedule(poses_deg=POSES_DEG[:2], holds_s=(20.0,), payloads_kg=(0.0,))
+    unguarded = run_long(CONFIGS["paper"], 20.9, schedule=hold, segment_s=5.0)
+    guarded = run_long(CONFIGS["guarded"], 20.9, schedule=hold, segment_s=5.0)
     trace_by_5s = [s["max_trace_p"] for s in unguarded["segments"]]
     report(
         "20 s hold, trace(P) per 5 s",
@@ -1179,8 +1162,7 @@ def test_a_quarter_hour_with_the_recommended_preset_stays_bounded():
     for the suite: ``bench/long_run.py --config recommended`` runs it (measured: 618 moves, 205
     payload steps, worst 0.22 deg during a move, 0.13 deg holding).
     """
-    lr = _long_run_module()
-    r = lr.run_long(lr.CONFIGS["recommended"], 900.0, segment_s=300.0)
+    r = run_long(CONFIGS["recommended"], 900.0, segment_s=300.0)
     report(
         "a quarter hour, recommended",
         wall_s=r["wall_s"],

@@ -8,7 +8,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from scripted_plan import HOLD_U_N, ScriptedPlan
+from support.plans import HOLD_U_N, ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
 from apc_feedback.baselines import PD, PdGains

@@ -7,11 +7,9 @@ effort ``forward_command_controller`` takes them.
 
 from __future__ import annotations
 
-import contextlib
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -23,11 +21,11 @@ from rclpy.qos import qos_profile_system_default
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from support.processes import node_process
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 import apc_msgs_py as wire
 from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG
-from apc_lab.experiment import stop_processes
 from apc_lab.scenario import CONFIG_DIR
 
 STATE_JOINTS = ["joint_2", "finger_joint", "joint_3", "joint_1"]
@@ -73,24 +71,12 @@ class Peer:
         return dict(zip(msg.name, getattr(msg, field), strict=True))
 
 
-@contextlib.contextmanager
-def robot_sim(tmp_path: Path, *params: str) -> Iterator[subprocess.Popen]:
+def robot_sim(tmp_path: Path, *params: str):
+    """``robot_sim`` with ``-p`` overrides, stopped when the test ends."""
     args = [sys.executable, "-m", "apc_plant_sim.robot_sim", "--ros-args"]
     for p in params:
         args += ["-p", p]
-    err = open(tmp_path / "robot_sim.err", "wb")
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err)
-    try:
-        yield proc
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        err.close()
+    return node_process(args, tmp_path / "robot_sim.err")
 
 
 def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
@@ -354,7 +340,7 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
             "payload.mass_kg:=2.268",
             "q_initial_deg:=[0.0, -45.0, -45.0]",
         ) as proc,
-        _process(arm, tmp_path / "arm.err") as controllers,
+        node_process(arm, tmp_path / "arm.err") as controllers,
     ):
 
         def sim_time() -> float:
@@ -390,14 +376,3 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
         graph.spin_until(lambda: running() or sim_time() >= start + 2.0, 120, "the move")
         final = np.rad2deg(np.array(peer.states[-1][1].position))
         assert np.abs(final - goal).max() < 0.01, final - goal
-
-
-@contextlib.contextmanager
-def _process(argv: list[str], err_path: Path) -> Iterator[subprocess.Popen]:
-    err = open(err_path, "wb")
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
-    try:
-        yield proc
-    finally:
-        stop_processes([proc], timeout_s=10.0)
-        err.close()

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scripted_plan import ScriptedPlan
+from support.plans import ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
 from apc_feedback.baselines import PD, PdGains
