@@ -15,7 +15,9 @@ from __future__ import annotations
 import contextlib
 import faulthandler
 import functools
+import math
 import os
+import re
 import signal
 import statistics
 import sys
@@ -49,6 +51,9 @@ from apc_core.robot import (
     with_inertia_error,
 )
 from apc_msgs_py import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
+
+#: Numbers in a log line (sample indices, times): a repeat of an event differs only in them.
+_DIGITS = re.compile(r"[-+]?\d+(\.\d+)?")
 
 ROBOT_PARAMS: tuple[Param, ...] = (
     Param(
@@ -268,6 +273,31 @@ def reject(node: Node, diagnostics: Diagnostics, topic: str, exc: Exception) -> 
     node.get_logger().warn(
         f"rejected message on '{topic}' ({n} so far): {exc}", throttle_duration_sec=1.0
     )
+
+
+def level_logger(node: Node, throttle_s: float = 1.0) -> Callable[[str, str], None]:
+    """``log(level, text)`` for the plain classes (``"info"``, ``"warn"``, ``"error"``) on
+    ``node``'s logger. A line that repeats another but for its numbers (the same event at
+    another sample) within ``throttle_s`` is dropped; different events are all logged (rclpy's
+    own throttle is per call site, and would drop the second of two events in a second)."""
+    logger = node.get_logger()
+    last: dict[tuple[str, str], float] = {}
+
+    def log(level: str, text: str) -> None:
+        key = (level, _DIGITS.sub("#", text))
+        now = time.monotonic()
+        if now - last.get(key, -math.inf) < throttle_s:
+            return
+        last[key] = now
+        # rclpy refuses a second severity from one call site: each level has its own.
+        if level == "error":
+            logger.error(text)
+        elif level == "warn":
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+    return log
 
 
 def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable) -> Callable:

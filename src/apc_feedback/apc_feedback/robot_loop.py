@@ -70,7 +70,7 @@ import numpy as np
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
-from apc_feedforward.goals import GoalQueue
+from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
 from apc_feedforward.nominal import Setpoint
 from apc_msgs_py import JointSample, TrajectoryGoal
 
@@ -240,13 +240,7 @@ class RobotLoop:
     def add_goal(self, goal: TrajectoryGoal) -> None:
         """Queue a goal (model order); it starts when the motion before it ends. Raises
         ValueError naming what is wrong (the node rejects it: counted and logged)."""
-        self.plan.add(goal)
-        self.count("goals_accepted")
-        self.log(
-            "info",
-            f"goal accepted: {len(goal.times_s)} point(s), {goal.times_s[-1]:.3f} s, "
-            f"{len(self.plan.queued)} queued",
-        )
+        accept_goal(self.plan, goal, self.count, self.log)
 
     def activate(self) -> None:
         """Start sampling with a start (hold the measured position); the first state that
@@ -322,21 +316,7 @@ class RobotLoop:
         holds); what the plan did on the way counted and logged. None if not even a hold could
         be computed (counted: ``feedforward_errors``)."""
         out = self.plan.sample(k, position, lambda sp: sp)
-        for exc in out.refused:
-            self.count("goals_refused")
-            self.log("error", f"sample {k}: goal refused when it was to start: {exc}")
-        for duration in out.started:
-            self.count("goals_started")
-            self.log("info", f"sample {k}: starting a {duration:.3f} s goal")
-        if out.plan_error is not None:
-            self.count("plan_errors")
-            self.log(
-                "error",
-                f"sample {k}: {out.plan_error}; dropping the plan, holding the last set point",
-            )
-        if out.failed is not None:
-            self.count("feedforward_errors")
-            self.log("error", f"sample {k}: {out.failed}; no command")
+        report_sampled(k, out, self.count, self.log)
         return out.setpoint
 
     def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:

@@ -71,6 +71,7 @@ from apc_core.nodeutil import (
     DiagnosticsPublisher,
     controller_robot_from_params,
     guarded,
+    level_logger,
     print_help,
     reject,
     run_nodes,
@@ -214,7 +215,7 @@ class RobotNode(LifecycleNode):
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=path_tolerance,
             count=diag.count,
-            log=self._log,
+            log=level_logger(self),
             **supervision,
         )
         diag.timing = self.loop.timing
@@ -321,17 +322,6 @@ class RobotNode(LifecycleNode):
     # -- loop -----------------------------------------------------------------------------------
     def _now(self) -> int:
         return self.get_clock().now().nanoseconds
-
-    def _log(self, level: str, text: str) -> None:
-        # rclpy keys a throttled line by its call site and refuses a second severity from the
-        # same site ("Logger severity cannot be changed between calls"), so each level has its own.
-        logger = self.get_logger()
-        if level == "error":
-            logger.error(text, throttle_duration_sec=1.0)
-        elif level == "warn":
-            logger.warning(text, throttle_duration_sec=1.0)
-        else:
-            logger.info(text, throttle_duration_sec=1.0)
 
     def _on_joint_state(self, msg: JointState) -> None:
         loop = self.loop

@@ -93,6 +93,41 @@ class Sampled(Generic[R]):
     failed: ValueError | None = None
 
 
+#: ``count(name)``: a counter on ``/diagnostics`` goes up by one.
+Count = Callable[[str], object]
+#: ``log(level, text)``: a line at ``"info"``, ``"warn"`` or ``"error"``.
+Log = Callable[[str, str], object]
+
+
+def report_sampled(k: int, out: Sampled[Any], count: Count, log: Log) -> None:
+    """Count and log what :meth:`GoalQueue.sample` did at sample ``k``: the same counters and
+    lines in every node that samples a plan (``feedforward_node``, ``robot_node``)."""
+    for exc in out.refused:
+        count("goals_refused")
+        log("error", f"sample {k}: goal refused when it was to start: {exc}")
+    for duration in out.started:
+        count("goals_started")
+        log("info", f"sample {k}: starting a {duration:.3f} s goal")
+    if out.plan_error is not None:
+        count("plan_errors")
+        log("error", f"sample {k}: {out.plan_error}; dropping the plan, holding the last set point")
+    if out.failed is not None:
+        count("feedforward_errors")
+        log("error", f"sample {k}: {out.failed}; no set point")
+
+
+def accept_goal(plan: GoalQueue, goal: wire.TrajectoryGoal, count: Count, log: Log) -> None:
+    """Queue ``goal`` in ``plan`` (it starts when the motion before it ends), counted and
+    logged. Raises ValueError naming what is wrong; the caller rejects the message."""
+    plan.add(goal)
+    count("goals_accepted")
+    log(
+        "info",
+        f"goal accepted: {len(goal.times_s)} point(s), {goal.times_s[-1]:.3f} s, "
+        f"{len(plan.queued)} queued",
+    )
+
+
 class GoalQueue:
     """The feedforward's plan: the first move, queued goals, and holds.
 

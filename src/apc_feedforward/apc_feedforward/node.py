@@ -41,11 +41,19 @@ from apc_core.nodeutil import (
     Stopwatch,
     controller_robot_from_params,
     guarded,
+    level_logger,
     reject,
     run_node,
 )
 from apc_core.params import Param, declare
-from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, Lookahead, Sampled, setpoint_message
+from apc_feedforward.goals import (
+    MOVE_PARAMS,
+    GoalQueue,
+    Lookahead,
+    accept_goal,
+    report_sampled,
+    setpoint_message,
+)
 from apc_feedforward.nominal import Setpoint
 
 PARAMS: tuple[Param, ...] = (
@@ -86,6 +94,7 @@ class FeedforwardNode(Node):
         self.goals = GoalQueue.from_params(self.controller_robot, values)
         self.lookahead = Lookahead(values["lookahead"])
         self.diagnostics = Diagnostics(self.get_fully_qualified_name())
+        self._log = level_logger(self)
         self._setpoint_msg = JointTrajectory()
         self._torque_msg = JointState()
 
@@ -109,15 +118,9 @@ class FeedforwardNode(Node):
     def _on_goal(self, msg: JointTrajectory) -> None:
         try:
             goal = wire.msg_to_trajectory_goal(msg, self.joint_names)
-            self.goals.add(goal)
+            accept_goal(self.goals, goal, self.diagnostics.count, self._log)
         except ValueError as exc:  # WireError, TrajectoryError
             reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
-            return
-        self.diagnostics.count("goals_accepted")
-        self.get_logger().info(
-            f"goal accepted: {len(goal.times_s)} point(s), {goal.times_s[-1]:.3f} s, "
-            f"{len(self.goals.queued)} queued"
-        )
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
@@ -136,29 +139,13 @@ class FeedforwardNode(Node):
         for j in due.samples:
             with Stopwatch(self.diagnostics, "compute"):
                 out = self.goals.sample(j, sample.position, self._messages)
-                self._report(j, out)
+                report_sampled(j, out, self.diagnostics.count, self._log)
             if out.rendered is None or out.setpoint is None:
                 break
             self._publish(*out.rendered)
             self.lookahead.sent(out.setpoint)
         self.lookahead.answered(k)
         self.diagnostics.count("samples")
-
-    def _report(self, k: int, out: Sampled[Any]) -> None:
-        """Counters and log lines of what the goal queue did at sample ``k``."""
-        for exc in out.refused:
-            reject(self, self.diagnostics, wire.TRAJECTORY_GOAL, exc)
-        for duration in out.started:
-            self.diagnostics.count("goals_started")
-            self.get_logger().info(f"sample {k}: starting a {duration:.3f} s goal")
-        if out.plan_error is not None:
-            self.diagnostics.count("plan_errors")
-            self.get_logger().error(
-                f"sample {k}: {out.plan_error}; dropping the plan and holding the last set point",
-                throttle_duration_sec=1.0,
-            )
-        if out.failed is not None:
-            reject(self, self.diagnostics, "feedforward_compute", out.failed)
 
     def _messages(self, sp: Setpoint) -> tuple[JointTrajectory, JointState]:
         """Set point and nominal torque of ``sp`` as messages (validated for the wire)."""
