@@ -1,6 +1,7 @@
 """Robot mode over DDS: the controllers drive a ros2_control-like driver through its interfaces.
 
-The driver here is not apc's plant node: it publishes ``/joint_states`` stamped with the wall
+The driver here is not apc's plant node but ``robot_sim``'s (:class:`RobotDriver`) in the test's
+process, on a clock the test controls: it publishes ``/joint_states`` stamped with the wall
 clock at 500 Hz (not 1/T), joint names shuffled, an extra gripper joint, no velocity, and takes
 ``std_msgs/Float64MultiArray`` efforts on ``/effort_controller/commands`` (what an effort
 forward_command_controller does), integrating the PUMA with a 5 lb payload the controllers do
@@ -19,10 +20,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import pytest
 import rclpy
-import yaml
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import State, Transition
@@ -32,13 +31,14 @@ from rclpy.qos import QoSPresetProfiles
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from support.processes import node_process, write_params
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 import apc_msgs_py as wire
-from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, Payload, load_robot, with_payload
-from apc_lab.experiment import stop_processes
+from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, Payload, load_robot
 from apc_lab.scenario import CONFIG_DIR
-from apc_plant_sim.plant import Plant, PlantConfig
+from apc_plant_sim.engines import PinocchioEngine
+from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -76,22 +76,32 @@ class Driver(Node):
     def __init__(self, context, rate_hz: float = 500.0, time_scale: float | None = None) -> None:
         super().__init__("test_driver", context=context)
         robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
-        true_robot = with_payload(robot, Payload(2.268, frame="wrist_center"))
         self.dt = 1.0 / rate_hz
-        # Integrated in real time, 0.5 ms at a time: the states match their wall stamps however
-        # late the timer is (a robot does not wait for its driver).
-        self.plant = Plant(
-            true_robot, PlantConfig(period=SUBSTEP, step=SUBSTEP), np.deg2rad(Q0_DEG)
+        # robot_sim's driver (RobotDriver) around apc's plant, 0.5 ms RK4 steps: names shuffled
+        # plus a gripper apc does not control, positions only, the last command held.
+        engine = PinocchioEngine(
+            robot,
+            Payload(2.268, frame="wrist_center"),
+            period=self.dt,
+            max_step=SUBSTEP,
+            q0=np.deg2rad(Q0_DEG),
+        )
+        names = robot.joint_names
+        self.robot = RobotDriver(
+            engine,
+            DriverConfig(
+                state_rate=rate_hz,
+                command_timeout=1e6,
+                state_joints=(names[2], names[0], names[1], "gripper_joint"),
+                extra_position=0.02,
+                publish_velocity=False,
+                publish_effort=False,
+            ),
         )
         self._t = self._stepped = time.monotonic()
         self.time_scale = time_scale
         self.sim_ns = 1_000 * wire.NS_PER_S  # sim time starts at 1000 s
         self.clock_pub = self.create_publisher(Clock, wire.CLOCK, wire.CLOCK_QOS)
-        # Held by the robot's own controller until apc commands (the true gravity torque).
-        data = true_robot.model.createData()
-        self.torque = pin.computeGeneralizedGravity(true_robot.model, data, self.plant.q).copy()
-        self.names = list(robot.joint_names)
-        self.order = [2, 0, 1]  # shuffled, plus a gripper apc does not control
         self.paused = False
         self.commands: list[tuple[float, np.ndarray]] = []
         self.positions: list[tuple[float, np.ndarray]] = []
@@ -109,6 +119,13 @@ class Driver(Node):
         self._waits = True  # False after a wait timed out, until samples come again
         if time_scale is not None:
             self.create_subscription(JointState, wire.SAMPLE, self._on_sample, wire.CONTROL_QOS)
+
+    @property
+    def _driver_time(self) -> float:
+        """The driver's clock (s): the simulated one, or the wall one since it started."""
+        if self.time_scale is not None:
+            return self.sim_ns * 1e-9
+        return self._t
 
     def _on_sample(self, msg: JointState) -> None:
         stamp = wire.stamp_to_ns(msg.header.stamp)
@@ -130,14 +147,15 @@ class Driver(Node):
             self._wait[3] = True
             if self._wait[2]:
                 self._wait = None
-        self.torque = np.array(msg.data)
-        self.commands.append((time.monotonic(), self.torque.copy()))
+        self.commands.append((time.monotonic(), np.array(msg.data)))
+        self.robot.offer(msg.data, self._driver_time)  # a bad one is counted, never applied
 
     def _step(self) -> None:
         now = time.monotonic()
-        if self.time_scale is None:
-            steps = round((now - self._t) / SUBSTEP)
-            self._t += steps * SUBSTEP
+        if self.time_scale is None:  # every driver period that has passed on the wall clock
+            while self._t + self.dt <= now:
+                self.robot.advance(self._t)
+                self._t += self.dt
         else:  # one period of simulated time per call
             if self._wait is not None:
                 if now - self._wait[1] < TICK_WAIT_S:
@@ -146,12 +164,11 @@ class Driver(Node):
             if self.tick_offset is None and now - self._stepped < IDLE_STEP_S:
                 return
             self._stepped = now
-            steps = round(self.dt / SUBSTEP)
+            self.robot.advance(self._driver_time)
             self.sim_ns += round(self.dt * wire.NS_PER_S)
             self.clock_pub.publish(Clock(clock=wire.ns_to_stamp(self.sim_ns)))
-        for _ in range(steps):
-            self.plant.step(self.torque)
-        q = self.plant.q
+        reading = self.robot.measure(self._driver_time)
+        q = self.q()
         self.positions.append((now, q.copy()))
         self.at_sim_ns[self.sim_ns] = q.copy()
         if self.paused:
@@ -161,15 +178,19 @@ class Driver(Node):
             msg.header.stamp = self.get_clock().now().to_msg()
         else:
             msg.header.stamp = wire.ns_to_stamp(self.sim_ns)
-        msg.name = [self.names[i] for i in self.order] + ["gripper_joint"]
-        msg.position = [float(q[i]) for i in self.order] + [0.02]
+        msg.name = list(reading.names)
+        msg.position = [float(v) for v in reading.position]
         self.pub.publish(msg)
         offset = self.tick_offset
         if self._waits and offset is not None and (self.sim_ns - offset) % T_NS == 0:
             self._wait = [self.sim_ns - offset, now, False, False]  # a tick falls here
 
+    def q(self) -> np.ndarray:
+        """The arm's position (rad, URDF order)."""
+        return self.robot.engine.q.copy()
+
     def q_deg(self) -> np.ndarray:
-        return np.rad2deg(self.plant.q)
+        return np.rad2deg(self.q())
 
 
 class Diagnostics:
@@ -205,17 +226,12 @@ def _goal(node: Node, seconds: float = 1.0):
 def _controllers(tmp_path: Path, **robot_node: object):
     """``robot_node`` with the shipped robot file, in its own process as on a robot, its
     parameters overridden by a second file; stopped by SIGINT."""
-    overrides = tmp_path / "overrides.yaml"
-    overrides.write_text(yaml.safe_dump({"robot_node": {"ros__parameters": robot_node}}))
+    overrides = write_params(tmp_path / "overrides.yaml", {"robot_node": robot_node})
     log_path = tmp_path / "controllers.log"
     cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(ROBOT_YAML)]
     cmd += ["--params-file", str(overrides)]
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
-    try:
+    with node_process(cmd, log_path, with_stdout=True) as proc:
         yield log_path
-    finally:
-        stop_processes([proc], timeout_s=10.0)
     assert proc.returncode == 0, log_path.read_text()[-3000:]
 
 
@@ -361,7 +377,7 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         graph.spin_until(lambda: starts, 10, "the start's set point")
         _spin_sim(graph, driver, 0.2)
         assert len(driver.commands) > n + 15
-        start = wire.msg_to_setpoint(starts[0], driver.names)
+        start = wire.msg_to_setpoint(starts[0], driver.robot.joint_names)
         # a re-activation locks the phase afresh: the start is the position at one of the
         # driver's steps within the period after the sample's stamp
         step_ns = round(driver.dt * wire.NS_PER_S)

@@ -1,20 +1,22 @@
 """Robot mode's loop closed offline: a driver on its own clock, the controllers on theirs, no ROS.
 
-What :mod:`apc_lab.offline` is for the lockstep wire, this is for robot mode: apc's plant
-stepped by a driver every ``driver_ms`` (it reports positions only, stamped with its time),
+What :mod:`apc_lab.offline` is for the lockstep wire, this is for robot mode: the simulated
+ros2_control robot of ``robot_sim`` (:class:`apc_plant_sim.robot_driver.RobotDriver` around apc's
+plant, reporting positions only, stamped with its time) cycling every ``driver_ms``,
 :class:`apc_feedback.robot_loop.RobotLoop` offered each state ``transport_ms`` after its stamp
-(the trip to the controllers and their wake-up) and taking its samples from them, its
-watchdog checked every T, the loop sampling the feedforward's plan itself, all on one synthetic
-clock. A command leaves when its state arrives
-and reaches the driver at its first cycle after that, plus a latency that :class:`Latency`
-chooses per command: the delay a drive or a network adds, on time or late. The 3-joint PUMA
-560 with 10 % inertia error in the controllers and a payload they do not know. Used by
-``test/test_robot_loop.py`` and ``bench/late_commands.py``.
+(the trip to the controllers and their wake-up) and taking its samples from them, its watchdog
+checked every T, the loop sampling the feedforward's plan itself, all on one synthetic clock. A
+command leaves when its state arrives and reaches the driver after a latency that
+:class:`Latency` chooses per command (the delay a network or a drive adds, on time or late);
+the driver applies the newest one at its first cycle after that. The 3-joint PUMA 560 with 10 %
+inertia error in the controllers and a payload they do not know. Used by
+``test/test_robot_loop.py``, ``test/test_supervisor.py`` and ``bench/late_commands.py``.
 """
 
 from __future__ import annotations
 
 import heapq
+import itertools
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -23,7 +25,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.robot import PAPER_START_DEG, Payload, load_robot, with_inertia_error, with_payload
+from apc_core.robot import PAPER_START_DEG, Payload, load_robot, with_inertia_error
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -33,9 +35,12 @@ from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import GoalQueue
 from apc_lab.scenario import CONFIG_DIR
 from apc_msgs_py import JointSample
-from apc_plant_sim.plant import Plant, PlantConfig, PlantError
+from apc_plant_sim.engines import EngineError, PinocchioEngine
+from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
 
 MS = 1_000_000  # ns
+#: The driver's command order: not the URDF's, so that the loop's mapping is exercised.
+COMMAND_JOINTS = ("joint_3", "joint_2", "joint_1")
 
 
 @dataclass
@@ -140,10 +145,27 @@ def run_robot_loop(
     T = T_NS * 1e-9
     robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
     controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
-    plant_robot = with_payload(robot, Payload(payload_kg, frame="wrist_center"))
     q0 = np.deg2rad(PAPER_START_DEG)
     dt = round(driver_ms * MS)
-    plant = Plant(plant_robot, PlantConfig(period=dt * 1e-9, step=dt * 1e-9), q0)
+    # One RK4 step per driver period; no command timeout (a forward_command_controller holds
+    # its last command) and positions only, as the robot files' drivers publish.
+    engine = PinocchioEngine(
+        robot,
+        Payload(payload_kg, frame="wrist_center"),
+        period=dt * 1e-9,
+        max_step=dt * 1e-9,
+        q0=q0,
+    )
+    driver = RobotDriver(
+        engine,
+        DriverConfig(
+            state_rate=1e9 / dt,
+            command_timeout=duration_s + 1.0,
+            command_joints=COMMAND_JOINTS,
+            publish_velocity=False,
+            publish_effort=False,
+        ),
+    )
     data = controller.model.createData()
     counts: Counter = Counter()
     lines: list[tuple[str, str]] = []
@@ -158,7 +180,7 @@ def run_robot_loop(
     loop = RobotLoop(
         law=AdaptiveFeedback(controller.model, config),
         sampling=RobotSamplingConfig(period=T),
-        command=CommandMap(robot.joint_names, robot.joint_names[::-1], robot.effort_limit),
+        command=CommandMap(robot.joint_names, COMMAND_JOINTS, robot.effort_limit),
         plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,
@@ -171,17 +193,16 @@ def run_robot_loop(
     latency = latency or Latency()
     transport = round(transport_ms * MS)
     log: list[tuple] = []
-    pending: list[tuple[int, np.ndarray]] = []  # (when the driver applies it, torque)
-    # Before activation another controller holds the arm (the true gravity torque).
-    torque = pin.computeGeneralizedGravity(plant_robot.model, plant_robot.model.createData(), q0)
+    # Before activation the brakes hold the arm (the driver has no command yet).
     moved = goal_deg is None
 
     def handle(step: Step, now: int) -> None:
         nonlocal moved
         if step.command is not None:
-            # The driver has run its cycle at ``now`` (if one falls there): the next one applies it.
-            pending.append((now + 1 + latency.next_ns(), loop.command.to_model(step.command)))
-            pending.sort(key=lambda arrival: arrival[0])  # the newest arrival is applied
+            # It reaches the driver after its latency; the driver applies the newest arrival at
+            # its first cycle after that (a cycle at the same instant has already run).
+            arrival = now + 1 + latency.next_ns()
+            heapq.heappush(events, (arrival, COMMAND, next(order), step.command.copy()))
             loop.command_published(now)
         plan = loop.plan.feedforward
         if not moved and plan is not None and step.setpoint is not None:
@@ -194,33 +215,35 @@ def run_robot_loop(
             moved = True
 
     # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
-    # driver cycle comes first, then a state's arrival, then the watchdog's check; activation is
-    # the first check.
-    CYCLE, ARRIVAL, WATCHDOG = 0, 1, 2
+    # command reaching the driver comes first, then a driver cycle, then a state's arrival, then
+    # the watchdog's check; activation is the first check.
+    COMMAND, CYCLE, ARRIVAL, WATCHDOG = 0, 1, 2, 3
+    order = itertools.count()
     t_act = 5000 * T_NS
     end = t_act + round(duration_s * 1e9)
     events: list[tuple[int, int, int, Any]] = [
-        (5000 * T_NS - 40 * MS + round(phase_ms * MS), CYCLE, 0, None),
-        (t_act, WATCHDOG, 1, None),
+        (5000 * T_NS - 40 * MS + round(phase_ms * MS), CYCLE, next(order), None),
+        (t_act, WATCHDOG, next(order), None),
     ]
-    order = 2
     while events:
         now, kind, _, payload = heapq.heappop(events)
         if now >= end:
             break
-        if kind == CYCLE:
-            while pending and pending[0][0] <= now:
-                torque = pending.pop(0)[1]
-            log.append((now, plant.q.copy()))
+        if kind == COMMAND:
+            driver.offer(payload, now * 1e-9)
+        elif kind == CYCLE:
+            reading = driver.measure(now * 1e-9)
+            log.append((now, reading.position.copy()))
             if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
-                state = JointSample(now, plant.q.copy(), None, None)
-                heapq.heappush(events, (now + transport, ARRIVAL, order, (len(log) - 1, state)))
-                order += 1
+                state = JointSample(now, reading.position.copy(), None, None)
+                heapq.heappush(
+                    events, (now + transport, ARRIVAL, next(order), (len(log) - 1, state))
+                )
             try:
-                plant.step(torque)
-            except PlantError:  # the arm is lost: the run ends here
+                driver.advance(now * 1e-9)
+            except EngineError:  # the arm is lost: the run ends here
                 break
-            heapq.heappush(events, (now + dt, CYCLE, order, None))
+            heapq.heappush(events, (now + dt, CYCLE, next(order), None))
         elif kind == ARRIVAL:
             index, state = payload
             step = loop.on_joint_state(state, now)
@@ -231,6 +254,5 @@ def run_robot_loop(
             if not loop.active:
                 loop.activate()
             handle(loop.tick(now), now)
-            heapq.heappush(events, (now + T_NS, WATCHDOG, order, None))
-        order += 1
+            heapq.heappush(events, (now + T_NS, WATCHDOG, next(order), None))
     return RobotRun(q0, log, loop.timing.figures(), counts, lines)
