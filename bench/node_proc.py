@@ -8,7 +8,7 @@ Started by ``bench/ros_loop.py`` and ``bench/multi_arm.py``; not meant to be run
                  [--no-param-services]
 
 ``--params`` is a JSON file ``{node_name: {parameter: value}}`` (``RunSpec.node_parameters()``).
-``arm`` puts feedforward, feedback and plant (and, with ``--recorder-out``, a recorder) on one
+``composed`` puts feedforward, feedback and plant (and, with ``--recorder-out``, a recorder) on one
 executor in this process; the other roles run one node. The spin loop is ``run_node``'s
 (``spin_once(timeout_sec=0.1)`` until the plant is done or a signal arrives) on
 ``nodeutil.make_executor`` (EventsExecutor by default), so a process here behaves like the

@@ -94,7 +94,7 @@ def target_rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         ok = ok and p99 is not None and p99 < 1000
         rows.append(
             (
-                "real time 1 kHz, one process (`arm`)",
+                "real time 1 kHz, one process (`composed`)",
                 f"late {_pct(late.get('pooled'))}, latency p99 "
                 f"{p99 if p99 is not None else 'n/a'} us",
                 "<= 1 % late, p99 < 1000 us",

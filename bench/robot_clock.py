@@ -68,7 +68,7 @@ import yaml
 
 RESULTS_JSON = benchlib.BENCH_DIR / "robot_clock.json"
 RESULTS_MD = benchlib.BENCH_DIR / "robot_clock.md"
-#: Where the console scripts are (``robot_sim``, ``arm``): beside this interpreter.
+#: Where the console scripts are (``robot_sim``, ``robot_node``): beside this interpreter.
 BIN = Path(sys.executable).parent
 
 RATES_HZ = (100.0, 250.0, 500.0, 1000.0)

@@ -42,7 +42,7 @@ def _node_classes() -> dict[str, type]:
     }
 
 
-#: The nodes each executable starts (``arm`` composes the three, ``arm --controllers`` the
+#: The nodes each executable starts (``composed`` composes the three, ``composed --controllers`` the
 #: controllers beside a plant of their own).
 EXECUTABLE_NODES: dict[str, tuple[str, ...]] = {
     "feedback_node": ("feedback_node",),
@@ -50,8 +50,8 @@ EXECUTABLE_NODES: dict[str, tuple[str, ...]] = {
     "feedforward_node": ("feedforward_node",),
     "plant_node": ("plant_node",),
     "robot_sim": ("robot_sim",),
-    "arm": ("feedforward_node", "feedback_node", "plant_node"),
-    "arm --controllers": ("feedforward_node", "feedback_node"),
+    "composed": ("feedforward_node", "feedback_node", "plant_node"),
+    "composed --controllers": ("feedforward_node", "feedback_node"),
 }
 
 
@@ -101,7 +101,7 @@ COMMANDS = documented_overrides()
 
 def test_the_readme_documents_overrides_beside_parameter_files():
     executables = {executable for executable, _ in COMMANDS}
-    assert {"feedback_node", "arm", "robot_node"} <= executables
+    assert {"feedback_node", "composed", "robot_node"} <= executables
 
 
 @pytest.mark.parametrize(

@@ -42,7 +42,7 @@ EXECUTABLES: dict[str, tuple[str, ...]] = {
     "apc_feedforward": ("feedforward_node",),
     "apc_feedback": ("feedback_node", "robot_node"),
     "apc_plant_sim": ("plant_node", "robot_sim"),
-    "apc_lab": ("arm", "experiment", "analyze", "apc_params"),
+    "apc_lab": ("composed", "experiment", "analyze", "apc_params"),
 }
 #: One node of each package that has one, run to ``--help`` (the lab's ``experiment`` runs from
 #: the install below).

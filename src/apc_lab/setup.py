@@ -22,7 +22,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "arm = apc_lab.arm:main",
+            "composed = apc_lab.composed:main",
             "experiment = apc_lab.experiment:main",
             "analyze = apc_lab.analyze:main",
             "apc_params = apc_lab.params_file:main",

@@ -1,7 +1,7 @@
 """``apc_params``: write the ROS parameter file of apc's nodes for a given URDF, to edit.
 
     apc_params --urdf my_arm.urdf --out my_arm.yaml [--lock-joints finger_1 finger_2]
-    arm --ros-args --params-file my_arm.yaml
+    composed --ros-args --params-file my_arm.yaml
     apc_params --urdf my_arm.urdf --out my_robot.yaml --robot-mode     # a ros2_control robot
     robot_node --ros-args --params-file my_robot.yaml
 
@@ -114,7 +114,7 @@ def render(
         body += _section("robot_node", ROBOT_NODE_PARAMS, robot, SHARED)
     else:
         header += [
-            "#   arm --ros-args --params-file <this file>          # the three nodes, one process",
+            "#   composed --ros-args --params-file <this file>      # the three nodes, one process",
             "#   ros2 run apc_feedback feedback_node --ros-args --params-file <this file>",
         ]
         feedforward = {

@@ -7,7 +7,7 @@ An engine holds the arm's state and integrates it under a torque held for one dr
 - ``pinocchio``: apc's own plant (:class:`apc_plant_sim.plant.Plant`: Pinocchio's ABA, classical
   RK4) on the model with the payload — the same arm as ``plant_node``;
 - ``mujoco``: MuJoCo's own dynamics and integrator on a model built from the URDF
-  (:mod:`apc_plant_sim.mujoco_arm`), with the effects of a physical arm.
+  (:mod:`apc_plant_sim.mujoco_engine`), with the effects of a physical arm.
 
 The payload is apc's: a point mass in a named frame, on from the start or picked up at a given
 time (:meth:`load_payload`). What a physical arm adds is :class:`ArmEffects`: friction and
@@ -217,7 +217,7 @@ def make_engine(
             robot, payload, period=period, max_step=max_step, q0=q0, loaded=loaded
         )
     if name == "mujoco":
-        from apc_plant_sim.mujoco_arm import JointEffects, MujocoEngine
+        from apc_plant_sim.mujoco_engine import JointEffects, MujocoEngine
 
         n = robot.n_joints
         joint_effects = JointEffects(

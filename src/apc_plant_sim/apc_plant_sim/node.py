@@ -59,7 +59,7 @@ from apc_core.params import ConfigError, Param, declare
 from apc_plant_sim.intake import WATCHDOG_PARAMS, Action, Filed, Source, TorqueIntake
 from apc_plant_sim.pacing import PACING_PARAMS, StatePacer
 from apc_plant_sim.plant import PlantError
-from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
+from apc_plant_sim.true_arm import TRUE_ARM_PARAMS, TrueArm
 
 MODES = ("realtime", "lockstep")
 
@@ -68,7 +68,7 @@ DERIVED = {"q_initial_deg": "q_start_deg", "payload.frame": "payload_frame"}
 
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
-    *ARM_PARAMS,
+    *TRUE_ARM_PARAMS,
     Param("mode", "realtime", "'realtime' (wall timer, newest torques) or 'lockstep'"),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
     Param(
@@ -109,7 +109,7 @@ class PlantNode(Node):
                 f"parameter 'mode': must be one of {', '.join(MODES)}, got {self.mode!r}"
             )
         chosen = fill_derived(values, robot, DERIVED)
-        self.arm = SimulatedArm.from_params(robot, values)
+        self.arm = TrueArm.from_params(robot, values)
         for line in chosen:
             self.get_logger().info(line)
         self.plant = self.arm.plant

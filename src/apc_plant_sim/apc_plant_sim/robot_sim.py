@@ -8,7 +8,7 @@ on ``command_topic``, ``SystemDefaultsQoS``, one value per joint in ``command_jo
 the newest one held). The loop, the command checks, the effort limits and the command timeout
 are :class:`apc_plant_sim.robot_driver.RobotDriver`; the physics is ``engine``
 (:mod:`apc_plant_sim.engines`): ``pinocchio`` (apc's plant) or ``mujoco`` (MuJoCo's own
-dynamics and integrator, :mod:`apc_plant_sim.mujoco_arm`). ``effects`` and the parameters after
+dynamics and integrator, :mod:`apc_plant_sim.mujoco_engine`). ``effects`` and the parameters after
 it add what a physical arm adds (friction, rotor inertia, encoder quantisation, the drive's
 velocity, a command delay); ``ideal`` turns them all off.
 
@@ -72,10 +72,10 @@ from apc_plant_sim.engines import (
     effects_from_values,
     make_engine,
 )
-from apc_plant_sim.mujoco_arm import INTEGRATORS
+from apc_plant_sim.mujoco_engine import INTEGRATORS
 from apc_plant_sim.node import DERIVED as PLANT_DERIVED
 from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
-from apc_plant_sim.simulated_arm import ARM_PARAMS, payload_from_params
+from apc_plant_sim.true_arm import TRUE_ARM_PARAMS, payload_from_params
 
 #: Where ros2_control's ``joint_state_broadcaster`` publishes (``use_local_topics: false``).
 JOINT_STATES_TOPIC = "/joint_states"
@@ -91,7 +91,7 @@ _DEFAULTS = DriverConfig()
 #: The arm's start and payload, declared as ``plant_node`` declares them (``payload.at_s`` is
 #: driver time since the first cycle here).
 PLANT_ARM_PARAMS = tuple(
-    p for p in ARM_PARAMS if p.name == "q_initial_deg" or p.name.startswith("payload.")
+    p for p in TRUE_ARM_PARAMS if p.name == "q_initial_deg" or p.name.startswith("payload.")
 )
 
 PARAMS: tuple[Param, ...] = (

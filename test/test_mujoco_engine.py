@@ -24,7 +24,7 @@ from apc_lab.reproduce import example_robot_urdf
 from apc_lab.scenario import build, paper_scenario, recommended_settings
 from apc_plant_sim.effects import PANDA_FRICTION_PHI1_NM, ArmEffects, puma560_effects
 from apc_plant_sim.engines import EngineError, effects_from_values, make_engine
-from apc_plant_sim.mujoco_arm import (
+from apc_plant_sim.mujoco_engine import (
     MIN_MASS_KG,
     JointEffects,
     MujocoEngine,

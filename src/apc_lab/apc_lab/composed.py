@@ -1,7 +1,7 @@
-"""``arm``: the nodes of one arm composed in one process, on one executor.
+"""``composed``: the nodes of one arm composed in one process, on one executor.
 
-    arm --ros-args --params-file config/puma560_3dof.yaml [-r __ns:=/arm0]
-    arm --controllers --ros-args --params-file ...    # feedforward + feedback only
+    composed --ros-args --params-file config/puma560_3dof.yaml [-r __ns:=/arm0]
+    composed --controllers --ros-args --params-file ...    # feedforward + feedback only
 
 The same ``plant_node``, ``feedforward_node`` and ``feedback_node`` as the three executables,
 built in one process: each reads its own section of the parameters file, a namespace remap
@@ -70,7 +70,7 @@ def main(args: Sequence[str] | None = None) -> int:
 
     return run_nodes(
         make_nodes,
-        prog="arm",
+        prog="composed",
         print_help=lambda: _help(controllers_only),
         args=argv,
         spin_until=ended,

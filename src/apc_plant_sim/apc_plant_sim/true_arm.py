@@ -17,7 +17,7 @@ from apc_core.robot import Payload, Robot, RobotModelError, with_payload
 from apc_plant_sim.plant import Plant, PlantConfig, PlantError
 
 #: The plant node's parameters of the simulated arm (beside the robot's own).
-ARM_PARAMS: tuple[Param, ...] = (
+TRUE_ARM_PARAMS: tuple[Param, ...] = (
     *params_from(PlantConfig, ""),
     Param("payload.mass_kg", 0.0, "payload on the simulated arm only (kg)", 0.0, 1e4),
     Param(
@@ -64,7 +64,7 @@ def payload_from_params(robot: Robot, values: Mapping[str, Any]) -> tuple[Payloa
         raise ConfigError(f"parameter 'payload.frame': {exc}") from None
 
 
-class SimulatedArm:
+class TrueArm:
     """The plant and the payload it picks up at sample ``pickup_k`` (0: carried from the start).
 
     Parameters
@@ -82,8 +82,8 @@ class SimulatedArm:
         self.pickup_k = pickup_k
 
     @classmethod
-    def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> SimulatedArm:
-        """Build from the node's parameter values (:data:`ARM_PARAMS` and ``period``)."""
+    def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> TrueArm:
+        """Build from the node's parameter values (:data:`TRUE_ARM_PARAMS` and ``period``)."""
         payload, loaded = payload_from_params(robot, values)
         try:
             config = PlantConfig(

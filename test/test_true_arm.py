@@ -1,4 +1,4 @@
-"""The plant node's arm from its parameters (apc_plant_sim.simulated_arm) and the feedforward's
+"""The plant node's arm from its parameters (apc_plant_sim.true_arm) and the feedforward's
 first move from its parameters (GoalQueue.from_params), no ROS graph: a bad value names its
 parameter; a payload picked up mid-motion comes on at its sample."""
 
@@ -13,7 +13,7 @@ from numpy.testing import assert_array_equal
 from apc_core.params import ConfigError
 from apc_core.robot import load_robot
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue
-from apc_plant_sim.simulated_arm import ARM_PARAMS, SimulatedArm
+from apc_plant_sim.true_arm import TRUE_ARM_PARAMS, TrueArm
 
 URDF = Path(__file__).resolve().parents[1] / "config" / "puma560_3dof.urdf"
 
@@ -31,7 +31,7 @@ def defaults(params, **changes):
 
 
 def test_the_defaults_build_an_arm_at_zero_without_payload(robot):
-    arm = SimulatedArm.from_params(robot, defaults(ARM_PARAMS))
+    arm = TrueArm.from_params(robot, defaults(TRUE_ARM_PARAMS))
     assert arm.pickup_k == 0 and not arm.pick_up()
     assert_array_equal(arm.plant.q, np.zeros(3))
     assert arm.plant.config.step == 0.0025 and arm.plant.config.forward_dynamics == "aba"
@@ -49,12 +49,12 @@ def test_the_defaults_build_an_arm_at_zero_without_payload(robot):
 )
 def test_a_bad_arm_parameter_is_named(robot, changes, parameter):
     with pytest.raises(ConfigError, match=f"parameter '{parameter}'"):
-        SimulatedArm.from_params(robot, defaults(ARM_PARAMS, **changes))
+        TrueArm.from_params(robot, defaults(TRUE_ARM_PARAMS, **changes))
 
 
 def test_a_payload_picked_up_mid_motion_comes_on_at_its_sample(robot):
-    values = defaults(ARM_PARAMS, payload__mass_kg=2.0, payload__at_s=0.03)
-    arm = SimulatedArm.from_params(robot, values)
+    values = defaults(TRUE_ARM_PARAMS, payload__mass_kg=2.0, payload__at_s=0.03)
+    arm = TrueArm.from_params(robot, values)
     assert arm.pickup_k == 3
     unloaded = arm.plant.robot
     for _ in range(3):
@@ -66,7 +66,7 @@ def test_a_payload_picked_up_mid_motion_comes_on_at_its_sample(robot):
 
 
 def test_a_payload_from_the_start_is_carried_at_once(robot):
-    arm = SimulatedArm.from_params(robot, defaults(ARM_PARAMS, payload__mass_kg=2.0))
+    arm = TrueArm.from_params(robot, defaults(TRUE_ARM_PARAMS, payload__mass_kg=2.0))
     assert arm.pickup_k == 0 and arm.plant.robot is arm.loaded
 
 

@@ -20,13 +20,13 @@ by apc's URDF) has two such bodies:
   ``q1' a`` (``a`` the joint axis) and only ``a^T I a`` enters the kinetic energy; its
   moments about the two axes perpendicular to ``a`` never act. The correction raises those two
   to ``C / 2`` each (A + B = C): M(q) and the bias forces are unchanged exactly
-  (``test_mujoco_arm.py``).
+  (``test_mujoco_engine.py``).
 - link 3 of the 3-joint arm (link 3 with the wrist's 1.25 kg lumped at the wrist centre):
   moments (0.01269, 0.19630, 0.21635) kg m^2, A + B falls 0.00735 short of C. Link 3 turns
   about every axis as the arm moves, so no correction is invisible; the smallest one (in the
   Frobenius norm of the inertia tensor) moves the three moments by ``(+d, +d, -d)`` with
   ``d = (C - A - B) / 3`` = 0.00245 kg m^2 along the principal axes. What that changes in M(q)
-  and in the bias forces is measured in ``test_mujoco_arm.py`` and stated in docs/robot.md.
+  and in the bias forces is measured in ``test_mujoco_engine.py`` and stated in docs/robot.md.
 
 :func:`physical_inertias` returns the corrected Pinocchio model and what it changed, so the
 MuJoCo arm and a Pinocchio arm can be compared with the same inertias.

@@ -1,4 +1,4 @@
-"""``arm``: the nodes of one arm composed in one process (apc_lab.arm).
+"""``composed``: the nodes of one arm composed in one process (apc_lab.composed).
 
 A lockstep run of the composed executable is the offline loop bit for bit (checked on every
 joint state an observer in this process receives: position, velocity, and the applied torque
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
-import yaml
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from support.processes import write_params
 
 import apc_msgs_py as wire
 from apc_lab.experiment import RunSpec
@@ -34,9 +34,7 @@ NAMES = ["joint_1", "joint_2", "joint_3"]
 def _params_file(tmp_path: Path, spec: RunSpec, **plant: object) -> Path:
     params = spec.node_parameters()
     params["plant_node"].update(plant)
-    path = tmp_path / "params.yaml"
-    path.write_text(yaml.safe_dump({k: {"ros__parameters": v} for k, v in params.items()}))
-    return path
+    return write_params(tmp_path / "params.yaml", params)
 
 
 def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
@@ -78,7 +76,7 @@ def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
     params = _params_file(tmp_path, spec, wait_for_subscribers=3)  # ff, fb and the observer
     with open(tmp_path / "arm.log", "wb") as log:
         arm = subprocess.Popen(
-            [str(BIN / "arm"), "--ros-args", "--params-file", str(params)],
+            [str(BIN / "composed"), "--ros-args", "--params-file", str(params)],
             stdout=log,
             stderr=subprocess.STDOUT,
         )
@@ -103,7 +101,9 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
         with open(tmp_path / "controllers.log", "wb") as log:
             procs.append(
                 subprocess.Popen(
-                    [str(BIN / "arm"), "--controllers", *cmd], stdout=log, stderr=subprocess.STDOUT
+                    [str(BIN / "composed"), "--controllers", *cmd],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
                 )
             )
         with open(tmp_path / "plant.log", "wb") as log:
@@ -128,14 +128,21 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
 
 
 def test_help_lists_each_node_and_bad_arguments_exit_2() -> None:
-    out = subprocess.run([str(BIN / "arm"), "--help"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [str(BIN / "composed"), "--help"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 0
     for section in ("--- plant_node ---", "--- feedforward_node ---", "--- feedback_node ---"):
         assert section in out.stdout
     assert "adaptive.q_position" in out.stdout and "lookahead" in out.stdout
     out = subprocess.run(
-        [str(BIN / "arm"), "--controllers", "--help"], capture_output=True, text=True, timeout=60
+        [str(BIN / "composed"), "--controllers", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert "--- plant_node ---" not in out.stdout
-    out = subprocess.run([str(BIN / "arm"), "--fast"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [str(BIN / "composed"), "--fast"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "--fast" in out.stderr
