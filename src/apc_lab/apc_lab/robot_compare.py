@@ -349,8 +349,15 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
             clock = [Parameter("use_sim_time", value=sim)]
             recorder = recorder_node(path, context, describe(case), sim)
             nodes.append(recorder)
+            # No /rosout: every case builds its nodes again, with the same names, in a fresh
+            # context of this process; rcl keeps one rosout publisher per node name and process
+            # and releases a lifecycle node's late, so the next case's robot_node logged into the
+            # last one's dead publisher ("Failed to publish log message to rosout"). Nothing in
+            # this private context reads /rosout; the log lines go to the run's log folder.
             controller = RobotNode(
-                context=context, parameter_overrides=clock + overrides(params["robot_node"])
+                context=context,
+                parameter_overrides=clock + overrides(params["robot_node"]),
+                enable_rosout=False,
             )
             nodes.append(controller)
             sender = Node("goal_sender", context=context)
@@ -369,7 +376,9 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
             )
             # The robot comes last: its first joint state finds everything listening.
             robot = RobotSimNode(
-                context=context, parameter_overrides=overrides(params["robot_sim"])
+                context=context,
+                parameter_overrides=overrides(params["robot_sim"]),
+                enable_rosout=False,
             )
             nodes.append(robot)
             executor.add_node(robot)
