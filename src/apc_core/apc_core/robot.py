@@ -204,6 +204,7 @@ def load_robot(
     gravity: float = PAPER_GRAVITY_M_S2,
     lock_joints: Sequence[str] = (),
     lock_positions: Mapping[str, float] | None = None,
+    keep_joints: Sequence[str] | None = None,
 ) -> Robot:
     """Build a serial-arm model from a URDF file path or a URDF XML string.
 
@@ -215,6 +216,8 @@ def load_robot(
         Magnitude of gravity (m/s^2) along -z of the base frame.
     lock_joints : sequence of str
         Joints to freeze (e.g. grippers), at ``lock_positions[name]`` (default 0).
+    keep_joints : sequence of str, optional
+        Freeze every joint but these as well (a recording's joints: the arm it moved).
 
     Returns
     -------
@@ -235,6 +238,12 @@ def load_robot(
     except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
         raise RobotModelError(f"Pinocchio could not build the URDF: {exc}") from None
 
+    if keep_joints is not None:
+        unknown = [name for name in keep_joints if not model.existJointName(name)]
+        if unknown:
+            raise RobotModelError(f"keep_joints: no joint named {unknown} in the URDF")
+        others = [name for name in list(model.names)[1:] if name not in keep_joints]
+        lock_joints = (*lock_joints, *(name for name in others if name not in lock_joints))
     if lock_joints:
         lock_positions = dict(lock_positions or {})
         ids = []

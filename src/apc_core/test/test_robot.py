@@ -621,3 +621,13 @@ def test_branch_is_accepted_when_one_side_is_locked() -> None:
 def test_lock_joints_with_unknown_name() -> None:
     with pytest.raises(RobotModelError, match="no joint named 'pinky'"):
         load_robot(two_link(extra=BRANCH), lock_joints=["thumb", "pinky"])
+
+
+def test_keep_joints_locks_every_other_joint() -> None:
+    """The arm a recording moved: its joints kept, the rest (here the thumb) locked at 0."""
+    kept = load_robot(two_link(extra=BRANCH), keep_joints=["shoulder", "elbow"])
+    locked = load_robot(two_link(extra=BRANCH), lock_joints=["thumb"])
+    assert kept.joint_names == locked.joint_names == ("shoulder", "elbow")
+    assert_allclose(kept.model.inertias[1].lever, locked.model.inertias[1].lever, atol=0)
+    with pytest.raises(RobotModelError, match=r"keep_joints: no joint named \['wrist'\]"):
+        load_robot(two_link(extra=BRANCH), keep_joints=["shoulder", "wrist"])

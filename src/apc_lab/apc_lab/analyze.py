@@ -41,9 +41,7 @@ def robot_of(run: RecordedRun) -> Robot | None:
                 lock_joints=tuple(scenario.get("lock_joints", ())),
             )
         if run.robot_description:
-            every = load_robot(run.robot_description).joint_names
-            others = tuple(j for j in every if j not in run.joint_names)
-            return load_robot(run.robot_description, lock_joints=others)
+            return load_robot(run.robot_description, keep_joints=run.joint_names)
     except RobotModelError:
         return None
     return None
