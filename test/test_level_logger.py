@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import rclpy
 
-from apc_core.nodeutil import level_logger
+from apc_core.node_logs import level_logger
 
 pytestmark = pytest.mark.ros
 

@@ -1,4 +1,5 @@
-"""Every package's ``package.xml`` declares what its code imports, by its rosdep key.
+"""Every package's ``package.xml`` declares what its code imports, by its rosdep key; the
+packages depend one way and their modules stay small.
 
 rosdep installs what ``package.xml`` lists; a module imported but not declared is a broken
 install on a machine that has only what rosdep gave it. Keys are rosdistro's (ROS packages by
@@ -136,3 +137,14 @@ def test_dependencies_point_one_way(package):
     used = _declared(package) | _imports(package) | _imports(package, "test")
     used &= set(PACKAGES) - {package}
     assert used <= MAY_USE[package], f"{package} uses {sorted(used - MAY_USE[package])}"
+
+
+def test_no_module_over_600_lines():
+    """Small modules with one job: a module that grows past 600 lines is split by job."""
+    long = {
+        str(path.relative_to(REPO)): n
+        for package in PACKAGES
+        for path in (REPO / "src" / package / package).rglob("*.py")
+        if (n := len(path.read_text().splitlines())) > 600
+    }
+    assert not long, long

@@ -35,7 +35,7 @@ def test_node_logs_go_to_the_folder_not_the_console(tmp_path):
         f"""
         from pathlib import Path
         import rclpy
-        from apc_core.nodeutil import node_logs_to
+        from apc_core.node_logs import node_logs_to
 
         with node_logs_to(Path({str(tmp_path / "logs")!r})):
             context = rclpy.Context()

@@ -65,13 +65,13 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 import apc_msgs_py as wire
+from apc_core.node_logs import level_logger
 from apc_core.nodeutil import (
     CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
     controller_robot_from_params,
     guarded,
-    level_logger,
     print_help,
     reject,
     run_nodes,

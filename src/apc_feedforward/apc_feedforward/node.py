@@ -34,6 +34,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 import apc_msgs_py as wire
+from apc_core.node_logs import level_logger
 from apc_core.nodeutil import (
     CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
@@ -41,7 +42,6 @@ from apc_core.nodeutil import (
     Stopwatch,
     controller_robot_from_params,
     guarded,
-    level_logger,
     reject,
     run_node,
 )

@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from apc_core.nodeutil import node_logs_to
+from apc_core.node_logs import node_logs_to
 from apc_core.robot import PAPER_GOAL_DEG, PAPER_START_DEG, example_robot_urdf
 from apc_lab import robot_compare, robot_report
 from apc_lab.analyze import analyze_file
