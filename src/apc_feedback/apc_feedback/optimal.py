@@ -32,6 +32,8 @@ from typing import Any, Literal
 import numpy as np
 from scipy.linalg import lapack
 
+from apc_feedback.arrays import finite_array
+
 __all__ = [
     "ControlError",
     "OneStepControl",
@@ -52,15 +54,7 @@ class ControlError(ValueError):
 # ---------------------------------------------------------------------------------- validation
 def _array(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     """``value`` as a finite float64 array of exactly ``shape``."""
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ControlError(f"{name} must be a real array of shape {shape}") from None
-    if a.shape != shape:
-        raise ControlError(f"{name} must have shape {shape}, got {a.shape}")
-    if not np.isfinite(a).all():
-        raise ControlError(f"{name} must be finite")
-    return a
+    return finite_array(name, value, shape, ControlError)
 
 
 def _model(F: Any, G: Any) -> tuple[np.ndarray, np.ndarray, int, int]:

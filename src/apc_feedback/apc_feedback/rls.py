@@ -60,6 +60,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from apc_feedback.arrays import finite_array
 from apc_feedback.rls_config import RlsConfig, RlsError
 
 __all__ = ["Rls", "RlsConfig", "RlsError", "RlsStep"]
@@ -518,12 +519,4 @@ def _vector(name: str, value: Any, size: int) -> np.ndarray:
 
 def _matrix(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     """``value`` as a finite float64 array of ``shape`` (always a fresh copy)."""
-    try:
-        a = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise RlsError(f"{name} must be a real array of shape {shape}") from None
-    if a.shape != shape:
-        raise RlsError(f"{name} must have shape {shape}, got {a.shape}")
-    if not np.isfinite(a).all():
-        raise RlsError(f"{name} must be finite")
-    return a
+    return finite_array(name, value, shape, RlsError, copy=True)
