@@ -41,13 +41,19 @@ def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
     """Joint states by stamp until the plant's process (the last of ``procs``) exits."""
     states: dict[int, JointState] = {}
     node = graph.add(rclpy.create_node("observer", context=graph.context))
-    node.create_subscription(
+    observer = node.create_subscription(
         JointState,
         wire.JOINT_STATES,
         lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
         # Deep: the run outpaces this test's executor, and keep-last 10 would drop samples.
         QoSProfile(depth=10_000, reliability=ReliabilityPolicy.RELIABLE),
     )
+    # DDS matches a writer and a reader on each side on its own: the plant may count the
+    # observer (its writer matched) while the observer has not matched the plant's writer yet
+    # and drops the first samples (seen on a loaded machine). A second subscription, made only
+    # once the observer has matched, is the plant's last awaited subscriber.
+    graph.spin_until(lambda: observer.get_publisher_count() >= 1, 60.0, "the plant's joint states")
+    node.create_subscription(JointState, wire.JOINT_STATES, lambda m: None, 10)
     deadline = time.monotonic() + 90
     while procs[-1].poll() is None:
         assert time.monotonic() < deadline, "the run did not end"
@@ -58,7 +64,7 @@ def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
 
 def _check_against_offline(states, scenario, settings) -> None:
     offline = run_offline(scenario, "adaptive", settings)
-    # The plant starts once the observer subscribes: it sees every sample.
+    # The plant starts once the observer has matched it (_observe): it sees every sample.
     assert sorted(states) == [k * 10_000_000 for k in range(len(offline.t))]
     for stamp, msg in states.items():
         k = stamp // 10_000_000
@@ -73,7 +79,8 @@ def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
     scenario = paper_scenario("c", hold_s=0.2)
     settings = paper_settings(1.5e5)
     spec = RunSpec(scenario, "adaptive", settings, "lockstep")
-    params = _params_file(tmp_path, spec, wait_for_subscribers=3)  # ff, fb and the observer
+    # ff, fb, the observer and its gate (_observe)
+    params = _params_file(tmp_path, spec, wait_for_subscribers=4)
     with open(tmp_path / "arm.log", "wb") as log:
         arm = subprocess.Popen(
             [str(BIN / "composed"), "--ros-args", "--params-file", str(params)],
@@ -94,7 +101,7 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
     scenario = paper_scenario("c", hold_s=0.0)
     settings = paper_settings(1.5e5)
     spec = RunSpec(scenario, "adaptive", settings, "lockstep")
-    params = _params_file(tmp_path, spec, wait_for_subscribers=3)
+    params = _params_file(tmp_path, spec, wait_for_subscribers=4)  # as in the lockstep test
     cmd = ["--ros-args", "--params-file", str(params)]
     procs: list[subprocess.Popen] = []
     try:
