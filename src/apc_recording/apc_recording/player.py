@@ -46,7 +46,8 @@ Every option is also a ROS parameter of the node (``bag``, ``rate``, ``topics``,
 ``clock_hz``, ``start``, ``duration``, ``remap``, ``wait_for_subscribers``), so a
 :class:`PlayerNode` can be composed in-process. It plays from a steady-clock timer on the
 executor that spins it, one message per timer callback when behind schedule, so nodes on the
-same executor get their turn between messages. The executable exits 0 at the end of the window
+same executor get their turn between messages; the due times and the bag time are
+:class:`apc_recording.playback.PlaybackTimeline`'s. The executable exits 0 at the end of the window
 (never with ``--loop``), cleanly on SIGINT/SIGTERM, and with code 2 and one line when the bag
 cannot be read or an option is invalid.
 
@@ -82,6 +83,7 @@ from apc_recording.bag import (
     qos_profiles_from_yaml,
     read_messages,
 )
+from apc_recording.playback import PlaybackTimeline
 
 #: ``--clock`` without a value: the rate of ``ros2 bag play --clock``.
 DEFAULT_CLOCK_HZ = 40.0
@@ -386,16 +388,13 @@ class PlayerNode(Node):
         start_ns = (first or 0) + wire.seconds_to_ns(values["start"])
         end_ns = start_ns + wire.seconds_to_ns(values["duration"]) if values["duration"] else None
         self.window_ns = (start_ns, end_ns)
+        self.timeline = PlaybackTimeline(start_ns, end_ns, self.rate)
         self.done = False
         self.exit_code = 0
         self.passes = 0
         self.pass_wall_s = 0.0
         self._iter: Iterator[BagMessage] | None = None
         self._next: BagMessage | None = None
-        self._t0: int | None = None  # monotonic ns of the current pass's start
-        self._last_sent_ns: int | None = None  # log time of the last message sent
-        self._last_wall_ns = 0
-        self._sent_this_pass = 0
         self._waited_since = time.monotonic()
 
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -423,12 +422,7 @@ class PlayerNode(Node):
     # ------------------------------------------------------------------------------------------
     def bag_time_ns(self) -> int:
         """Current playback time on the bag's time line (ns), what ``--clock`` publishes."""
-        start_ns = self.window_ns[0]
-        if self._t0 is None or self.rate == 0:
-            return start_ns if self._last_sent_ns is None else self._last_sent_ns
-        now = start_ns + int((time.monotonic_ns() - self._t0) * self.rate)
-        end_ns = self.window_ns[1]
-        return now if end_ns is None else min(now, end_ns)
+        return self.timeline.bag_time_ns(time.monotonic_ns())
 
     def _publish_clock(self) -> None:
         if self._clock_pub is not None and not self.done:
@@ -455,16 +449,9 @@ class PlayerNode(Node):
         start_ns, end_ns = self.window_ns
         self._iter = read_messages(self.path, list(self.played), start_ns, end_ns)
         self._next = next(self._iter, None)
-        self._t0 = now_ns
-        self._sent_this_pass = 0
+        self.timeline.begin_pass(now_ns)
         self.passes += 1
         self._publish_clock()
-
-    def _due_ns(self, msg: BagMessage) -> int:
-        assert self._t0 is not None
-        if self.rate == 0:
-            return self._t0
-        return self._t0 + int((msg.log_time_ns - self.window_ns[0]) / self.rate)
 
     def _schedule(self, delay_ns: int) -> None:
         self._timer.timer_period_ns = max(0, delay_ns)
@@ -475,7 +462,7 @@ class PlayerNode(Node):
         if self.done:
             return
         now = time.monotonic_ns()
-        if self._t0 is None:
+        if not self.timeline.started:
             if not self._subscribers_ready():
                 self._schedule(_WAIT_POLL_NS)
                 return
@@ -484,31 +471,30 @@ class PlayerNode(Node):
         if msg is None:
             self._end_pass()
             return
-        due = self._due_ns(msg)
+        due = self.timeline.due_ns(msg.log_time_ns)
         if due > now:
             self._schedule(due - now)
             return
         self.played[msg.topic].publisher.publish(bytes(msg.data))
         self.published[msg.topic] += 1
-        self._sent_this_pass += 1
-        self._last_sent_ns = msg.log_time_ns
-        self._last_wall_ns = time.monotonic_ns()
+        self.timeline.sent(msg.log_time_ns, time.monotonic_ns())
         assert self._iter is not None
         self._next = next(self._iter, None)
         if self._next is None:
             self._end_pass()
         else:
-            self._schedule(max(0, self._due_ns(self._next) - time.monotonic_ns()))
+            due = self.timeline.due_ns(self._next.log_time_ns)
+            self._schedule(max(0, due - time.monotonic_ns()))
 
     def _end_pass(self) -> None:
-        assert self._t0 is not None
-        if self._sent_this_pass:
-            self.pass_wall_s = (self._last_wall_ns - self._t0) / 1e9
-        if self.loop and self._sent_this_pass:
+        sent = self.timeline.sent_this_pass
+        if sent:
+            self.pass_wall_s = self.timeline.pass_wall_s()
+        if self.loop and sent:
             self._begin_pass(time.monotonic_ns())
             self._schedule(0)
             return
-        if self._sent_this_pass == 0:
+        if sent == 0:
             self.get_logger().warn("no message of the selected topics in the window")
         self.get_logger().info(
             f"played {sum(self.published.values())} messages in {self.passes} pass(es)"
