@@ -338,7 +338,7 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
             "sim_time:=true",
             "state_rate:=100.0",
             "payload.mass_kg:=2.268",
-            "q_initial_deg:=[0.0, -45.0, -45.0]",
+            f"q_initial_deg:={list(PAPER_START_DEG)}",
         ) as proc,
         node_process(arm, tmp_path / "arm.err") as controllers,
     ):
