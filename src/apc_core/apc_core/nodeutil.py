@@ -351,9 +351,9 @@ EXECUTOR_ENV = "APC_EXECUTOR"
 def make_executor(kind: str, context: rclpy.Context | None = None) -> Any:
     """``events``: rclpy's ``EventsExecutor``, ``single``: ``SingleThreadedExecutor``.
 
-    The events executor takes a message to its callback in ~22 us against ~120 us
-    (``bench/ros_loop.py``; two nodes ping-ponging a JointState, one process) and doubles the
-    lockstep samples per second; results are the same bit for bit. Only its ``spin_once`` is
+    The events executor takes a message to its callback several times faster, so lockstep runs
+    more samples per second (figures: docs/nodes.md and docs/performance.md, from
+    ``bench/ros_loop.py``); results are the same bit for bit. Only its ``spin_once`` is
     used: in the Jazzy wheels apc runs on, ``EventsExecutor.spin()`` runs no callbacks and
     ignores shutdown.
     """

@@ -9,7 +9,7 @@ bounded on every arm measured), on the first of these triggers, each named:
 - ``tracking_error``: ``|q - q_d|`` on a joint beyond ``error_bound`` *and* larger than it
   was ``error_growth_samples`` samples before, its rate ``|qd - qd_d|`` not smaller: an error
   growing, not a constant offset nor an arm being brought to rest (a hold started on an arm
-  still sagging after a watchdog gap overshoots 2 deg while the law stops it). The error is
+  still sagging after a watchdog gap overshoots while the law stops it). The error is
   judged when a command computed now can act: ``error_lead`` (2) driver periods ahead at its
   rate, ``|q - q_d + lead (qd - qd_d)|``, once the loop has told the driver period
   (:meth:`Supervisor.expect_command_delay`): the fallback's first command acts that much
@@ -353,8 +353,7 @@ class Supervisor:
         region always; one at ``gain_low`` or below, or a direction pushed the wrong way, only
         with the arm ``off_path`` (beyond ``suspicion_error``): identified on a physical arm
         (rotor inertia, a drive's delay, quantised positions) they pass through there while the
-        law tracks (the PUMA with every effect on through robot_sim: a ratio of 0.03 and an
-        eigenvalue of -0.12 during a move tracked within 1.4 deg).
+        law tracks (figures: docs/robot.md, "The supervisor's defaults").
         """
         prior = getattr(law, "prior_input_gain", None)
         if prior is None:
@@ -398,11 +397,10 @@ def fallback_gains(config: SupervisorConfig, driver_period: float) -> PdGains:
     """Computed torque's gains for a driver of this period (s): ``config.kp``/``kv``, their
     natural frequency lowered to ``fallback_bandwidth / driver_period`` where that is less.
 
-    A command acts a driver period after its state, two with a drive that adds a cycle; with
-    the Panda's light wrist on a 100 Hz driver (20 ms in all, robot_sim's ``effects: panda``,
-    case (c)) the 30 rad/s of Kp 900 / Kv 60 lost the arm (600 deg), 20 rad/s held it within
-    6.5 deg, 15 within 9.5 (a softer hold sags more under a payload the model does not know:
-    the PUMA 15 and 25 deg). The damping ratio is kept.
+    A command acts a driver period after its state, two with a drive that adds a cycle: on a
+    slow driver a light arm is lost at gains a fast one holds, while a softer hold sags more
+    under a payload the model does not know. The damping ratio is kept. Figures: docs/robot.md,
+    "The supervisor's defaults".
     """
     omega = math.sqrt(config.kp)
     if omega <= 0.0 or driver_period <= 0.0:

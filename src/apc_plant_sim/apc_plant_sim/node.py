@@ -137,8 +137,8 @@ class PlantNode(Node):
         diag = self.diagnostics
         # Real time applies the newest torque and never waits for one: a reliable subscription
         # would hold every later torque back until a lost one is repaired (head-of-line
-        # blocking: 50-110 ms with FastDDS's defaults on a link with 1 % loss, longer than the
-        # watchdog, so the arm braked mid-move). Best effort matches the controllers' reliable
+        # blocking: with FastDDS's defaults on a lossy link, longer than the watchdog, so the
+        # arm braked mid-move; docs/reliability.md). Best effort matches the controllers' reliable
         # publishers and hands over what arrives. Lockstep needs every sample: reliable.
         torque_qos = qos
         if self.mode != "lockstep":
