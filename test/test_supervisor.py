@@ -25,6 +25,7 @@ from apc_feedback.supervisor import (
 from apc_feedforward.nominal import Setpoint
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_msgs_py import JointSample
+from apc_plant_sim.effects import puma560_effects
 
 T = 0.01
 GOAL_DEG = PAPER_GOAL_DEG
@@ -275,6 +276,59 @@ def test_a_move_on_a_slow_driver_is_held_by_the_fallback_with_the_pid_too():
     assert run_robot_loop(2.0, **slow).max_tracking_error_deg() > 90.0
     for fallback, bound in (("computed_torque", 8.0), ("pid", 9.0)):
         run = run_robot_loop(3.0, supervisor=SupervisorConfig(fallback=fallback), **slow)
+        assert run.counts["supervisor.handovers"] >= 1
+        assert run.max_tracking_error_deg() < bound
+
+
+# -- a physical arm in simulated time (robot_sim's effects: puma560, MuJoCo) -------------------
+def _physical(rate_hz: float, duration: float = 2.5, **kwargs):
+    """The paper's move on the 3-joint PUMA with every physical effect, a ``rate_hz`` driver."""
+    ms = 1000.0 / rate_hz
+    return run_robot_loop(
+        duration,
+        goal_deg=GOAL_DEG,
+        driver_ms=ms,
+        phase_ms=0.37 * ms,
+        transport_ms=0.3 * min(1.0, ms),
+        effects=puma560_effects(),
+        **kwargs,
+    )
+
+
+@pytest.mark.parametrize("rate_hz", [250, 500, 1000])
+def test_the_physical_puma_tracks_on_a_250hz_or_faster_driver_without_a_hand_over(rate_hz):
+    """Commands on time: measured 1.00, 1.32 and 1.12 deg (joint 3; the goal of 1 deg is missed
+    by up to a third of a degree: bench/robot_physical.py), no trigger fires."""
+    run = _physical(rate_hz, supervisor=SupervisorConfig())
+    assert run.max_tracking_error_deg() < 1.5
+    assert not [name for name in run.counts if name.startswith("supervisor.")]
+
+
+def test_commands_a_cycle_late_lose_the_physical_puma_unsupervised_but_not_supervised():
+    """30 % of the commands one driver cycle late on a 500 Hz driver (a loaded machine's jitter,
+    what wall time has and simulated time has not): the law alone ends 23 deg off (seed 2);
+    supervised the fallback takes the joints (7.7 deg with computed torque, 6.3 with the PID)."""
+    late = dict(probability=0.3, seed=2)
+    lost = _physical(500, latency=Latency(late_ms=2.0, **late))
+    assert lost.max_tracking_error_deg() > 10.0
+    for fallback, bound in (("computed_torque", 9.0), ("pid", 7.5)):
+        run = _physical(
+            500,
+            latency=Latency(late_ms=2.0, **late),
+            supervisor=SupervisorConfig(fallback=fallback),
+        )
+        assert run.counts["supervisor.handovers"] >= 1
+        assert run.max_tracking_error_deg() < bound
+
+
+def test_the_supervisor_keeps_the_physical_puma_on_a_100hz_driver():
+    """A command acts 2.5 driver periods after its state (the driver's cycle, the drive's own
+    and the differenced velocity): the law alone loses the arm (181 deg); the computed-torque
+    fallback keeps it within 11.7 deg (its sag under the unknown payload at the gains a 100 Hz
+    driver allows: lost by the wall-time benchmark's 10 deg rule), the PID within 4.1 deg."""
+    assert _physical(100).max_tracking_error_deg() > 90.0
+    for fallback, bound in (("computed_torque", 13.0), ("pid", 5.0)):
+        run = _physical(100, supervisor=SupervisorConfig(fallback=fallback))
         assert run.counts["supervisor.handovers"] >= 1
         assert run.max_tracking_error_deg() < bound
 

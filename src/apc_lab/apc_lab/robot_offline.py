@@ -9,8 +9,10 @@ checked every T, the loop sampling the feedforward's plan itself, all on one syn
 command leaves when its state arrives and reaches the driver after a latency that
 :class:`Latency` chooses per command (the delay a network or a drive adds, on time or late);
 the driver applies the newest one at its first cycle after that. The 3-joint PUMA 560 with 10 %
-inertia error in the controllers and a payload they do not know. Used by
-``test/test_robot_loop.py``, ``test/test_supervisor.py`` and ``bench/late_commands.py``.
+inertia error in the controllers and a payload they do not know; with ``effects`` the arm is
+MuJoCo's with a physical arm's friction, rotor inertia and drive (``robot_sim``'s ``effects``).
+Used by ``test/test_robot_loop.py``, ``test/test_supervisor.py``, ``bench/late_commands.py`` and
+``bench/robot_physical.py``.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import GoalQueue
 from apc_lab.scenario import CONFIG_DIR
 from apc_msgs_py import JointSample
-from apc_plant_sim.engines import EngineError, PinocchioEngine
+from apc_plant_sim.effects import ArmEffects
+from apc_plant_sim.engines import EngineError, PinocchioEngine, make_engine
 from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
 
 MS = 1_000_000  # ns
@@ -111,6 +114,7 @@ def run_robot_loop(
     settings: Mapping[str, Any] | None = None,
     supervisor: SupervisorConfig | None = None,
     setup: Callable[[RobotLoop], object] | None = None,
+    effects: ArmEffects | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
 
@@ -140,6 +144,11 @@ def run_robot_loop(
     setup : callable, optional
         ``setup(loop)`` once the loop is built, before activation: to observe the law or to
         make it go wrong (wrap ``loop.law.update``).
+    effects : ArmEffects, optional
+        A physical arm (``apc_plant_sim.effects.puma560_effects()``: friction, rotor inertia,
+        quantised encoders, the drive's differenced velocity, a drive that adds a cycle), as
+        ``robot_sim``'s ``effects: puma560``: the arm is MuJoCo's and its states carry the
+        drive's velocity. Default: the ideal arm on apc's plant, positions only.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -149,21 +158,29 @@ def run_robot_loop(
     dt = round(driver_ms * MS)
     # One RK4 step per driver period; no command timeout (a forward_command_controller holds
     # its last command) and positions only, as the robot files' drivers publish.
-    engine = PinocchioEngine(
-        robot,
-        Payload(payload_kg, frame="wrist_center"),
-        period=dt * 1e-9,
-        max_step=dt * 1e-9,
-        q0=q0,
-    )
+    payload = Payload(payload_kg, frame="wrist_center")
+    if effects is None:
+        engine = PinocchioEngine(robot, payload, period=dt * 1e-9, max_step=dt * 1e-9, q0=q0)
+    else:
+        engine = make_engine(
+            "mujoco",
+            robot,
+            payload,
+            effects,
+            period=dt * 1e-9,
+            max_step=min(dt * 1e-9, 1e-3),
+            q0=q0,
+            loaded=True,
+        )
     driver = RobotDriver(
         engine,
         DriverConfig(
             state_rate=1e9 / dt,
             command_timeout=duration_s + 1.0,
             command_joints=COMMAND_JOINTS,
-            publish_velocity=False,
+            publish_velocity=effects is not None,
             publish_effort=False,
+            sensing=effects if effects is not None else ArmEffects(),
         ),
     )
     data = controller.model.createData()
@@ -235,7 +252,8 @@ def run_robot_loop(
             reading = driver.measure(now * 1e-9)
             log.append((now, reading.position.copy()))
             if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
-                state = JointSample(now, reading.position.copy(), None, None)
+                velocity = None if reading.velocity is None else reading.velocity.copy()
+                state = JointSample(now, reading.position.copy(), velocity, None)
                 heapq.heappush(
                     events, (now + transport, ARRIVAL, next(order), (len(log) - 1, state))
                 )
