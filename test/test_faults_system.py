@@ -1,9 +1,10 @@
 """Process- and system-level faults: dying nodes, signals, a killed recorder, a lossy network.
 
 Every node here runs as its own process (``sys.executable -m <package>.<module>``), as on a
-robot; an in-test rclpy node (:class:`Observer`) watches ``joint_states``, the torques and
-``/diagnostics``. Times measured here are printed (``pytest -s``) and quoted in
-docs/reliability.md; what is asserted are the documented bounds plus a scheduling margin.
+robot (:class:`support.processes.Children`); an in-test rclpy node
+(:class:`support.observer.Observer`) watches ``joint_states``, the torques and ``/diagnostics``.
+Times measured here are printed (``pytest -s``) and quoted in docs/reliability.md; what is
+asserted are the documented bounds plus a scheduling margin.
 
 - a feedback node that dies (SIGKILL) in real time: the plant applies the nominal torque
   alone and reports a warning; a feedforward node that dies: the plant brakes within the
@@ -33,29 +34,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
-import yaml
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import JointState
-from support.processes import write_params
+from diagnostic_msgs.msg import DiagnosticStatus
+from support.netns import Link
+from support.observer import Observer
+from support.processes import Children, process_group, wait_all, write_params
+from support.report import report
 
 import apc_msgs_py as wire
-from apc_lab.experiment import RunSpec, stop_processes
+from apc_lab.experiment import RunSpec
 from apc_lab.long_run import CONFIGS, POSES_DEG, Schedule, run_long
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_recording.bag import BagTruncatedWarning, bag_info, read_messages
 from apc_recording.bag.recovery import main as bag_recover
 
-REPO = Path(__file__).resolve().parents[1]
-MODULES = {
-    "plant_node": "apc_plant_sim.node",
-    "feedforward_node": "apc_feedforward.node",
-    "feedback_node": "apc_feedback.node",
-    "recorder": "apc_recording.recorder",
-}
 T = 0.010
 WATCHDOG_S = 0.05
 #: The feedforward node's lookahead (its default): how many samples ahead its torques are.
@@ -64,16 +55,8 @@ LOOKAHEAD = 1
 SCHEDULING_MARGIN_S = 0.15
 
 
-def report(what: str, **values: object) -> None:
-    """Print a measurement (shown with ``pytest -s``; quoted in docs/reliability.md)."""
-    text = ", ".join(
-        f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items()
-    )
-    print(f"\n[faults] {what}: {text}", flush=True)
-
-
 # ----------------------------------------------------------------------------------------------
-# Processes and the observer
+# Real-time runs, and what the observer sees of them
 # ----------------------------------------------------------------------------------------------
 def realtime_params(case: str = "c", **plant: object) -> dict:
     """Node parameters of the paper's case for a real-time run that lasts until stopped."""
@@ -84,195 +67,6 @@ def realtime_params(case: str = "c", **plant: object) -> dict:
     )
     params["plant_node"].update(plant)
     return params
-
-
-class Children:
-    """Node processes of one test; each has a log file; all are stopped in :meth:`close`."""
-
-    def __init__(self, tmp_path: Path, params_file: Path | None = None) -> None:
-        self.dir = tmp_path
-        self.params_file = params_file
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.dead: list[subprocess.Popen] = []
-        self._n = 0
-
-    def start(
-        self,
-        name: str,
-        *args: str,
-        prefix: tuple[str, ...] = (),
-        env: dict | None = None,
-        key: str | None = None,
-    ) -> subprocess.Popen:
-        key = key or name
-        self._n += 1
-        ros_args = ["--ros-args"]
-        if self.params_file is not None and name != "recorder":
-            ros_args += ["--params-file", str(self.params_file)]
-        stem = self.dir / f"{key}.{self._n}"
-        with open(f"{stem}.out", "wb") as out, open(f"{stem}.err", "wb") as err:
-            proc = subprocess.Popen(
-                [*prefix, sys.executable, "-m", MODULES[name], *ros_args, *args],
-                stdout=out,
-                stderr=err,
-                env=env,
-            )
-        proc.stderr_path = Path(f"{stem}.err")  # type: ignore[attr-defined]
-        if key in self.procs:
-            self.dead.append(self.procs[key])
-        self.procs[key] = proc
-        return proc
-
-    def start_controllers(self) -> None:
-        """The feedforward and feedback nodes (the plant is started once they are up)."""
-        self.start("feedforward_node")
-        self.start("feedback_node")
-
-    def kill(self, key: str) -> float:
-        """SIGKILL a node; return the monotonic time of the kill.
-
-        It is not waited for here: reaping a process can take a while (its DDS threads and
-        shared memory are torn down) and the observer must keep spinning meanwhile, or the
-        receive times it records would be late. :meth:`close` reaps it.
-        """
-        proc = self.procs[key]
-        t = time.monotonic()
-        proc.kill()
-        return t
-
-    def stderr(self, key: str) -> str:
-        return self.procs[key].stderr_path.read_text(errors="replace")  # type: ignore[attr-defined]
-
-    def close(self) -> None:
-        stop_processes([*self.procs.values(), *self.dead], timeout_s=3.0)
-
-
-def deep(qos: QoSProfile, depth: int = 1000) -> QoSProfile:
-    """``qos`` with a KEEP_LAST ``depth`` history (best effort stays best effort)."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=qos.reliability,
-        durability=qos.durability,
-    )
-
-
-class Observer:
-    """An rclpy node in the test process that records what the nodes publish.
-
-    ``states``: ``(wall, stamp_ns, q, qd, effort)`` per ``joint_states``; ``ff``: ``{stamp:
-    u_n}``; ``diag``: ``(wall, level, message, values)`` of the plant's ``/diagnostics``;
-    ``raw``: ``{(topic, key): [bytes, ...]}`` of every message when ``raw=True``.
-    """
-
-    def __init__(self, raw: bool = False, states: bool = True) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("fault_observer", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.states: list[tuple[float, int, np.ndarray, np.ndarray, np.ndarray | None]] = []
-        self.ff: dict[int, np.ndarray] = {}
-        self.diag: list[tuple[float, int, str, dict[str, str]]] = []
-        self.feedback_diag: dict[str, str] = {}  # the feedback node's latest values
-        self.raw: dict[tuple[str, str], list[tuple[float, bytes]]] = {}
-        # A deep reader queue: the observer is the reference, it must not drop what it is slow
-        # to take (KEEP_LAST 10 dropped five joint states once on a loaded machine).
-        qos = deep(wire.CONTROL_QOS)
-        if raw:
-            for spec in wire.TOPICS:
-                topic = self.node.resolve_topic_name(spec.name)
-                self.node.create_subscription(
-                    spec.msg_type,
-                    spec.name,
-                    lambda data, topic=topic, cls=spec.msg_type: self._on_raw(topic, cls, data),
-                    deep(spec.qos),
-                    raw=True,
-                )
-        else:
-            if states:  # (an extra joint_states subscriber counts for wait_for_subscribers)
-                self.node.create_subscription(JointState, wire.JOINT_STATES, self._on_state, qos)
-            self.node.create_subscription(JointState, wire.FEEDFORWARD_TORQUE, self._on_ff, qos)
-            self.node.create_subscription(
-                DiagnosticArray, wire.DIAGNOSTICS, self._on_diag, deep(wire.DIAGNOSTICS_QOS)
-            )
-
-    def _on_state(self, msg: JointState) -> None:
-        effort = np.array(msg.effort) if len(msg.effort) else None
-        self.states.append(
-            (
-                time.monotonic(),
-                wire.stamp_to_ns(msg.header.stamp),
-                np.array(msg.position),
-                np.array(msg.velocity),
-                effort,
-            )
-        )
-
-    def _on_ff(self, msg: JointState) -> None:
-        self.ff[wire.stamp_to_ns(msg.header.stamp)] = np.array(msg.effort)
-
-    def _on_diag(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name.endswith("plant_node"):
-                values = {kv.key: kv.value for kv in status.values}
-                self.diag.append((time.monotonic(), status.level, status.message, values))
-            elif status.name.endswith("feedback_node"):
-                self.feedback_diag = {kv.key: kv.value for kv in status.values}
-
-    def _on_raw(self, topic: str, cls: type, data: bytes) -> None:
-        key = ""
-        if topic == "/diagnostics":  # three writers: order is only defined per writer
-            key = deserialize_message(data, cls).status[0].name
-        self.raw.setdefault((topic, key), []).append((time.monotonic(), bytes(data)))
-
-    # -- spinning -------------------------------------------------------------------------------
-    def spin_for(self, seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.005)
-
-    def spin_until(self, condition, timeout_s: float, what: str, procs=()) -> float:
-        """Spin until ``condition()``; return the time it took. Fails naming ``what``."""
-        t0 = time.monotonic()
-        while not condition():
-            for proc in procs:
-                assert proc.poll() is None, f"{what}: a node exited with {proc.returncode}"
-            assert time.monotonic() - t0 < timeout_s, f"{what}: not within {timeout_s} s"
-            self.executor.spin_once(timeout_sec=0.005)
-        return time.monotonic() - t0
-
-    def publishers(self, topic: str) -> int:
-        return self.node.count_publishers(self.node.resolve_topic_name(topic))
-
-    def subscribers(self, topic: str) -> int:
-        return self.node.count_subscribers(self.node.resolve_topic_name(topic))
-
-    def controllers_up(self) -> bool:
-        """Both controllers publish their torques (they are running and discovered)."""
-        return bool(
-            self.publishers(wire.FEEDFORWARD_TORQUE) and self.publishers(wire.FEEDBACK_TORQUE)
-        )
-
-    # -- queries --------------------------------------------------------------------------------
-    def k(self) -> int:
-        return self.states[-1][1] // 10_000_000 if self.states else -1
-
-    def diag_after(self, t: float, level: int | None = None) -> list:
-        return [d for d in self.diag if d[0] > t and (level is None or d[1] == level)]
-
-    def close(self) -> None:
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
-@pytest.fixture
-def observer():
-    obs = Observer()
-    try:
-        yield obs
-    finally:
-        obs.close()
 
 
 def _nominal_only(obs: Observer, state) -> bool:
@@ -480,35 +274,6 @@ def test_lockstep_three_processes_peer_killed_ends_with_error(tmp_path, observer
 SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 
 
-def _wait_all(procs: dict[str, subprocess.Popen], timeout_s: float) -> dict[str, float]:
-    """Poll until every process has exited; return each one's exit time from now (s)."""
-    t0 = time.monotonic()
-    took: dict[str, float] = {}
-    while len(took) < len(procs) and time.monotonic() - t0 < timeout_s:
-        for name, proc in procs.items():
-            if name not in took and proc.poll() is not None:
-                took[name] = time.monotonic() - t0
-        time.sleep(0.002)
-    return took
-
-
-def process_group(pgid: int) -> list[str]:
-    """Processes (``pid name state``) whose process group is ``pgid``, from ``/proc``."""
-    members = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        name = stat[stat.index("(") + 1 : stat.rindex(")")]
-        fields = stat[stat.rindex(")") + 2 :].split()
-        if int(fields[2]) == pgid:
-            members.append(f"{entry.name} {name} {fields[0]}")
-    return members
-
-
 @pytest.mark.ros
 @SIGNALS
 def test_every_node_stops_on_signal_within_2s(tmp_path, observer, sig):
@@ -529,7 +294,7 @@ def test_every_node_stops_on_signal_within_2s(tmp_path, observer, sig):
         obs.spin_until(lambda: obs.k() >= 50, 30, "the run", list(kids.procs.values()))
         for proc in kids.procs.values():
             proc.send_signal(sig)
-        took = _wait_all(kids.procs, 10.0)
+        took = wait_all(kids.procs, 10.0)
         report(f"{signal.Signals(sig).name} -> node exit", **{k: v for k, v in took.items()})
         for name, proc in kids.procs.items():
             assert name in took, f"{name} still running 10 s after {signal.Signals(sig).name}"
@@ -715,187 +480,6 @@ def test_killed_recorder_keeps_an_exact_prefix_of_the_run(tmp_path):
 # ----------------------------------------------------------------------------------------------
 # 4. Plant and controllers in two network namespaces, over a delayed, lossy link
 # ----------------------------------------------------------------------------------------------
-#: A user-space netem for kernels without the netem qdisc: it attaches to one TAP device in each
-#: namespace and copies Ethernet frames between them, dropping each with probability ``loss``
-#: and delivering the rest after ``delay +- jitter`` (uniform, so frames may be reordered, as
-#: with netem's jitter). On SIGTERM it prints its counts as JSON.
-LINK_EMULATOR = r"""
-import ctypes, fcntl, heapq, json, os, random, select, signal, struct, sys, time
-ns_a, dev_a, ns_b, dev_b = sys.argv[1:5]
-delay, jitter, loss = float(sys.argv[5]) / 1e3, float(sys.argv[6]) / 1e3, float(sys.argv[7])
-rng = random.Random(int(sys.argv[8]))
-libc = ctypes.CDLL(None, use_errno=True)
-
-def attach(ns, dev):
-    fd = os.open(f"/var/run/netns/{ns}", os.O_RDONLY)
-    if libc.setns(fd, 0x40000000) != 0:  # CLONE_NEWNET
-        raise OSError(ctypes.get_errno(), f"setns({ns})")
-    os.close(fd)
-    tap = os.open("/dev/net/tun", os.O_RDWR | os.O_NONBLOCK)
-    fcntl.ioctl(tap, 0x400454CA, struct.pack("16sH", dev.encode(), 0x0002 | 0x1000))  # TAP, NO_PI
-    return tap
-
-a, b = attach(ns_a, dev_a), attach(ns_b, dev_b)
-peer = {a: b, b: a}
-queue, seq, stats, stop = [], 0, {"frames": 0, "dropped": 0, "delivered": 0}, []
-signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-signal.signal(signal.SIGINT, lambda *_: stop.append(1))
-print("ready", flush=True)
-while not stop:
-    timeout = max(0.0, queue[0][0] - time.monotonic()) if queue else 0.2
-    try:
-        ready = select.select([a, b], [], [], timeout)[0]
-    except InterruptedError:
-        continue
-    now = time.monotonic()
-    for fd in ready:
-        while True:
-            try:
-                frame = os.read(fd, 65536)
-            except (BlockingIOError, InterruptedError):
-                break
-            stats["frames"] += 1
-            if rng.random() < loss:
-                stats["dropped"] += 1
-                continue
-            due = now + max(0.0, delay + rng.uniform(-jitter, jitter))
-            heapq.heappush(queue, (due, seq, peer[fd], frame))
-            seq += 1
-    now = time.monotonic()
-    while queue and queue[0][0] <= now:
-        _, _, fd, frame = heapq.heappop(queue)
-        try:
-            os.write(fd, frame)
-            stats["delivered"] += 1
-        except OSError:
-            pass
-print(json.dumps(stats), flush=True)
-"""
-
-
-def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=20)
-    if check and proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)}: {proc.stderr.strip()}")
-    return proc
-
-
-class Link:
-    """Two network namespaces made by this test, joined by one link; everything in them is ours.
-
-    ``kind`` is ``"netem"`` (a veth pair with the kernel's netem qdisc on both ends) or, where
-    the kernel has no netem (``tc`` says "Specified qdisc kind is unknown"), ``"tap"``: a TAP
-    device in each namespace joined by :data:`LINK_EMULATOR`. Addresses 10.200.0.1/30 and
-    10.200.0.2/30 exist only inside the two namespaces.
-    """
-
-    ADDRESSES = ("10.200.0.1", "10.200.0.2")
-
-    def __init__(self, tmp_path: Path, extra_env: dict[str, str] | None = None) -> None:
-        self.extra_env = dict(extra_env or {})
-        tag = f"{os.getpid() % 100000:05d}{random.randrange(1000):03d}"
-        self.ns = (f"apcA{tag}", f"apcB{tag}")
-        self.dev = (f"apcA{tag}", f"apcB{tag}")  # 12 characters (limit 15)
-        self.dir = tmp_path
-        self.kind = ""
-        self.emulator: subprocess.Popen | None = None
-        self.stats: list[dict] = []
-        self._made: list[str] = []
-
-    def make(self) -> None:
-        for ns in self.ns:
-            try:
-                proc = _ip("ip", "netns", "add", ns, check=False)
-            except FileNotFoundError:
-                pytest.skip("network namespaces refused: no 'ip' command (iproute2)")
-            if proc.returncode != 0:
-                pytest.skip(f"network namespaces refused: {proc.stderr.strip()}")
-            self._made.append(ns)
-        (a, b), (da, db) = self.ns, self.dev
-        _ip("ip", "-n", a, "link", "add", da, "type", "veth", "peer", "name", db, "netns", b)
-        try:
-            probe = _ip(
-                "tc", "-n", a, "qdisc", "add", "dev", da, "root", "netem", "delay", "1ms",
-                check=False,
-            )  # fmt: skip
-            netem_error = (probe.stderr.strip() or "tc failed") if probe.returncode else ""
-        except FileNotFoundError:
-            netem_error = "no 'tc' command"
-        if not netem_error:
-            self.kind = "netem"
-            _ip("tc", "-n", a, "qdisc", "del", "dev", da, "root")
-        else:
-            self.kind = "tap"
-            _ip("ip", "-n", a, "link", "del", da)
-            for ns, dev in ((a, da), (b, db)):
-                tap = _ip("ip", "-n", ns, "tuntap", "add", "dev", dev, "mode", "tap", check=False)
-                if tap.returncode != 0:
-                    pytest.skip(
-                        f"no link emulation: netem qdisc unavailable ({netem_error}) and TAP "
-                        f"devices refused ({tap.stderr.strip()})"
-                    )
-        for ns, dev, addr in zip(self.ns, self.dev, self.ADDRESSES, strict=True):
-            _ip("ip", "-n", ns, "link", "set", "lo", "up")
-            _ip("ip", "-n", ns, "addr", "add", f"{addr}/30", "dev", dev)
-            _ip("ip", "-n", ns, "link", "set", "dev", dev, "multicast", "on", "up")
-            _ip("ip", "-n", ns, "route", "add", "224.0.0.0/4", "dev", dev)
-
-    def impair(self, delay_ms: float, jitter_ms: float, loss: float) -> None:
-        """Set the link's delay (each way), jitter and loss probability (each way)."""
-        if self.kind == "netem":
-            for ns, dev in zip(self.ns, self.dev, strict=True):
-                if delay_ms or loss:
-                    _ip(
-                        "tc", "-n", ns, "qdisc", "replace", "dev", dev, "root", "netem",
-                        "delay", f"{delay_ms}ms", f"{jitter_ms}ms", "loss", f"{100 * loss}%",
-                    )  # fmt: skip
-                else:
-                    _ip("tc", "-n", ns, "qdisc", "del", "dev", dev, "root", check=False)
-            return
-        self._stop_emulator()
-        self.emulator = subprocess.Popen(
-            [sys.executable, "-c", LINK_EMULATOR, self.ns[0], self.dev[0], self.ns[1],
-             self.dev[1], str(delay_ms), str(jitter_ms), str(loss), str(random.randrange(10**6))],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )  # fmt: skip
-        line = self.emulator.stdout.readline()  # type: ignore[union-attr]
-        assert line.strip() == "ready", self.emulator.stderr.read()  # type: ignore[union-attr]
-
-    def _stop_emulator(self) -> None:
-        if self.emulator is None:
-            return
-        self.emulator.terminate()
-        try:
-            out, _ = self.emulator.communicate(timeout=5)
-            self.stats.append(yaml.safe_load(out.strip().splitlines()[-1]))
-        except (subprocess.TimeoutExpired, IndexError, yaml.YAMLError):
-            self.emulator.kill()
-            self.emulator.wait()
-        self.emulator = None
-
-    def env(self, side: int) -> dict[str, str]:
-        """Environment of a node in namespace ``side``: DDS over UDP on the subnet, with the
-        other side as a static peer (no shared memory: it would bypass the link)."""
-        env = dict(os.environ)
-        env.update(
-            ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET",
-            ROS_STATIC_PEERS=self.ADDRESSES[1 - side],
-            FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
-        )
-        env.update(self.extra_env)
-        return env
-
-    def prefix(self, side: int) -> tuple[str, ...]:
-        return ("ip", "netns", "exec", self.ns[side])
-
-    def close(self) -> None:
-        self._stop_emulator()
-        for ns in self._made:
-            _ip("ip", "netns", "del", ns, check=False)
-        self._made.clear()
-
 
 #: FastDDS writer/reader timings for a lossy link. A lost sample of a reliable topic holds back
 #: every later one until it is repaired (in-order delivery); with FastDDS's defaults (heartbeat
