@@ -7,6 +7,7 @@ import random
 
 import pytest
 from support.graph import Graph
+from support.observer import Observer
 
 # Set before any rclpy context is created (contexts read the environment at init), so tests that
 # run nodes never see another run's traffic and never leave this machine.
@@ -28,3 +29,13 @@ def graph():
         yield g
     finally:
         g.close()
+
+
+@pytest.fixture
+def observer():
+    """An :class:`observer.Observer` of the test's node processes; closed after the test."""
+    obs = Observer()
+    try:
+        yield obs
+    finally:
+        obs.close()

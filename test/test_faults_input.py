@@ -3,11 +3,11 @@ bad configuration, torque limits.
 
 The strongest check is :func:`test_fuzz_garbage_on_every_topic_leaves_a_lockstep_run_bit_identical`:
 a lockstep run of plant + feedforward + feedback in one process while a separate node throws
-thousands of hypothesis-generated invalid messages at every subscribed topic; every one is
-rejected and counted by the node it reaches, no callback raises, every output is finite, and
-the run equals the offline loop (= the clean run) bit for bit. Injected messages carry
-``header.frame_id = "fuzz"`` so the capturing node can tell them from the nodes' own output
-(the nodes never read ``frame_id``).
+thousands of hypothesis-generated invalid messages (:mod:`support.fuzz`) at every subscribed
+topic; every one is rejected and counted by the node it reaches, no callback raises, every
+output is finite, and the run equals the offline loop (= the clean run) bit for bit. Injected
+messages carry ``header.frame_id = "fuzz"`` so the capturing node (:mod:`support.capture`) can
+tell them from the nodes' own output (the nodes never read ``frame_id``).
 """
 
 from __future__ import annotations
@@ -16,551 +16,32 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pytest
 import rclpy
-from builtin_interfaces.msg import Duration, Time
-from diagnostic_msgs.msg import DiagnosticArray
 from hypothesis import HealthCheck, Phase, given, settings
-from hypothesis import strategies as st
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from support.arm import NAMES, ROBOT, T_NS, N
+from support.capture import Capture, assert_all_finite, compare_with_offline
+from support.fuzz import BATCH, Garbage, extreme_goal
 from support.graph import Graph
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from support.nodes import counter, errors, overrides
+from support.parameter_rig import ParameterRig, assert_refused
+from support.qos import DEEP_QOS
+from support.stand_ins import StandInPlant, stand_in_controllers, torque
+from trajectory_msgs.msg import JointTrajectory
 
 import apc_msgs_py as wire
-from apc_core.robot import load_robot
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_lab.experiment import RunSpec
-from apc_lab.scenario import PUMA_3DOF_URDF, paper_scenario, paper_settings, run_offline
+from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_plant_sim.node import PlantNode
 
 pytestmark = pytest.mark.ros
-
-ROBOT = load_robot(PUMA_3DOF_URDF)
-NAMES: tuple[str, ...] = ROBOT.joint_names
-N = len(NAMES)
-LOWER, UPPER = ROBOT.position_limits
-T_NS = 10_000_000
-FUZZ = "fuzz"  # header.frame_id of every injected message
-NAN, INF = float("nan"), float("inf")
-
-#: What the capturing node and the injector use: deep enough that nothing is ever dropped.
-DEEP_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
-
-
-def _overrides(values: dict[str, Any]) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in values.items()]
-
-
-def counter(node: Any, key: str) -> int:
-    return node.diagnostics.counters.get(key, 0)
-
-
-def errors(node: Any) -> int:
-    """Exceptions a node's callbacks caught (a bug, never bad input: that is 'rejected')."""
-    return counter(node, "callback_errors")
-
-
-# ----------------------------------------------------------------------------------------------
-# Stamps: resolved when the message is published, relative to the plant's current sample k
-# ----------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Stamp:
-    """``kind``: rel (plausible: k + a), neg (< 0), offgrid (k + a, plus b ns), nanosec
-    (nanosec >= 1e9), stale (k - a, a >= 2: older than any sample a node still waits for),
-    far (k + 100000 + a: in the future, only for torques)."""
-
-    kind: str
-    a: int = 0
-    b: int = 0
-
-    def resolve(self, k: int) -> Time:
-        if self.kind == "nanosec":
-            return Time(sec=max(k + self.a, 0) * T_NS // wire.NS_PER_S, nanosec=self.b)
-        ns = {
-            "rel": max(k + self.a, 0) * T_NS,
-            "neg": -self.a * T_NS - self.b,
-            "offgrid": max(k + self.a, 0) * T_NS + self.b,
-            "stale": (k - self.a) * T_NS,
-            "far": (k + 100_000 + self.a) * T_NS,
-        }[self.kind]
-        sec, nanosec = divmod(ns, wire.NS_PER_S)
-        return Time(sec=sec, nanosec=nanosec)
-
-
-def stamps(*kinds: str) -> st.SearchStrategy[Stamp]:
-    options = {
-        "rel": st.builds(Stamp, st.just("rel"), st.integers(-3, 3)),
-        "neg": st.one_of(
-            st.builds(Stamp, st.just("neg"), st.integers(1, 10**6)),  # on the grid
-            st.builds(Stamp, st.just("neg"), st.integers(0, 10**6), st.integers(1, T_NS - 1)),
-        ),
-        "offgrid": st.builds(
-            Stamp, st.just("offgrid"), st.integers(-2, 3), st.integers(1, T_NS - 1)
-        ),
-        "nanosec": st.builds(
-            Stamp, st.just("nanosec"), st.integers(-2, 3), st.integers(wire.NS_PER_S, 2**32 - 1)
-        ),
-        "stale": st.builds(Stamp, st.just("stale"), st.integers(2, 50)),
-        "far": st.builds(Stamp, st.just("far"), st.integers(0, 10**5)),
-    }
-    return st.one_of(*(options[k] for k in kinds))
-
-
-PLAUSIBLE = st.floats(-3.0, 3.0, allow_nan=False)
-BAD = st.one_of(
-    st.sampled_from([NAN, INF, -INF]),
-    st.floats(1.0e6, 1e308, exclude_min=True),
-    st.floats(-1e308, -1.0e6, exclude_max=True),
-)
-UNKNOWN_NAME = st.text(max_size=8).filter(lambda s: s not in NAMES)
-
-
-def vec(draw: Any, n: int, values: Any = PLAUSIBLE) -> list[float]:
-    return [draw(values) for _ in range(n)]
-
-
-def spoil(draw: Any, values: list[float]) -> list[float]:
-    """One entry replaced by NaN, Inf or a value beyond 1e6."""
-    out = list(values)
-    out[draw(st.integers(0, len(out) - 1))] = draw(BAD)
-    return out
-
-
-NAME_DEFECTS = ("no_names", "missing", "unknown", "extra", "duplicate")
-
-
-def apply_name_defect(draw: Any, defect: str, names: list[str], columns: list[list]) -> list[str]:
-    """Spoil the joint names; ``columns`` (per-joint arrays) are kept consistent in place."""
-    i = draw(st.integers(0, N - 1))
-    if defect == "no_names":
-        return []
-    if defect == "missing":
-        for col in columns:
-            if len(col) == N:
-                del col[i]
-        return names[:i] + names[i + 1 :]
-    if defect == "unknown":
-        return [*names[:i], draw(UNKNOWN_NAME), *names[i + 1 :]]
-    if defect == "extra":
-        for col in columns:
-            if len(col) == N:
-                col.append(draw(PLAUSIBLE))
-        return [*names, draw(UNKNOWN_NAME)]
-    j = draw(st.integers(0, N - 1).filter(lambda j: j != i))
-    out = list(names)
-    out[i] = out[j]
-    return out
-
-
-# ----------------------------------------------------------------------------------------------
-# Garbage messages: each is invalid for every node that subscribes to its topic
-# ----------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Garbage:
-    """One injected message. ``expect``: the counter it must bump at the receiving node(s)."""
-
-    topic: str
-    defect: str
-    stamp: Stamp
-    names: tuple[str, ...] = ()
-    fields: tuple[tuple[str, tuple[float, ...]], ...] = ()
-    points: tuple[tuple[tuple[str, tuple[float, ...]], ...], ...] = ()
-    times_ns: tuple[int, ...] = ()
-    tfs_nanosec: int = 0
-    expect: str = "rejected"
-
-    def expected_counter(self, k: int) -> str:
-        """``rejected`` or ``out_of_order`` (a stale torque), given the plant's sample k."""
-        if self.expect == "out_of_order" and k - self.stamp.a < 0:
-            return "rejected"  # older than sample 0: a negative stamp
-        return self.expect
-
-    def build(self, k: int) -> Any:
-        if self.defect == "empty":
-            msg = (
-                JointState()
-                if self.topic != wire.TRAJECTORY_GOAL and self.topic != wire.SETPOINT
-                else JointTrajectory()
-            )
-            msg.header.frame_id = FUZZ
-            return msg
-        if self.topic in (wire.JOINT_STATES, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE):
-            msg = JointState(name=list(self.names), **{f: list(v) for f, v in self.fields})
-        else:
-            msg = JointTrajectory(joint_names=list(self.names))
-            for i, point in enumerate(self.points):
-                t = self.times_ns[i] if i < len(self.times_ns) else 0
-                sec, nanosec = divmod(t, wire.NS_PER_S)
-                p = JointTrajectoryPoint(
-                    time_from_start=Duration(sec=sec, nanosec=nanosec),
-                    **{f: list(v) for f, v in point},
-                )
-                if i == 0 and self.tfs_nanosec:
-                    p.time_from_start.nanosec = self.tfs_nanosec
-                msg.points.append(p)
-        msg.header.stamp = self.stamp.resolve(k)
-        msg.header.frame_id = FUZZ
-        return msg
-
-
-ANY_STAMP = ("rel", "neg", "offgrid", "nanosec", "stale")
-
-
-@st.composite
-def bad_joint_state(draw: Any) -> Garbage:
-    """Invalid on ``joint_states`` for both controllers (ff needs position, fb also velocity)."""
-    defect = draw(
-        st.sampled_from(
-            (
-                "empty",
-                *NAME_DEFECTS,
-                "len_position",
-                "len_velocity",
-                "len_effort",
-                "bad_position",
-                "bad_velocity",
-                "bad_effort",
-                "stamp",
-            )
-        )
-    )
-    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
-    position, velocity = vec(draw, N), vec(draw, N)
-    effort = vec(draw, N) if draw(st.booleans()) else []
-    if defect in NAME_DEFECTS:
-        names = apply_name_defect(draw, defect, names, [position, velocity, effort])
-    elif defect == "len_position":
-        position = vec(draw, draw(st.sampled_from((0, 1, 2, 4, 5))))
-    elif defect == "len_velocity":
-        velocity = vec(draw, draw(st.sampled_from((1, 2, 4))))
-    elif defect == "len_effort":
-        effort = vec(draw, draw(st.sampled_from((1, 2, 4))))
-    elif defect == "bad_position":
-        position = spoil(draw, position)
-    elif defect == "bad_velocity":
-        velocity = spoil(draw, velocity)
-    elif defect == "bad_effort":
-        effort = spoil(draw, vec(draw, N))
-    stamp = draw(
-        stamps(*(("neg", "offgrid", "nanosec", "stale") if defect == "stamp" else ANY_STAMP))
-    )
-    return Garbage(
-        wire.JOINT_STATES,
-        defect,
-        stamp,
-        tuple(names),
-        (("position", tuple(position)), ("velocity", tuple(velocity)), ("effort", tuple(effort))),
-    )
-
-
-@st.composite
-def bad_torque(draw: Any, topic: str) -> Garbage:
-    """Invalid on a torque topic (the plant), or a stale stamp the plant must ignore."""
-    defect = draw(
-        st.sampled_from(
-            (
-                "empty",
-                *NAME_DEFECTS,
-                "len_effort",
-                "bad_effort",
-                "has_position",
-                "has_velocity",
-                "stamp",
-                "stale",
-            )
-        )
-    )
-    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
-    effort = vec(draw, N, st.floats(-50.0, 50.0))
-    position: list[float] = []
-    velocity: list[float] = []
-    if defect in NAME_DEFECTS:
-        names = apply_name_defect(draw, defect, names, [effort])
-    elif defect == "len_effort":
-        effort = vec(draw, draw(st.sampled_from((0, 1, 2, 4))))
-    elif defect == "bad_effort":
-        effort = spoil(draw, effort)
-    elif defect == "has_position":
-        position = vec(draw, N)
-    elif defect == "has_velocity":
-        velocity = vec(draw, N)
-    if defect == "stamp":
-        stamp = draw(stamps("neg", "offgrid", "nanosec", "far"))
-    elif defect == "stale":
-        stamp = draw(stamps("stale"))
-    else:
-        stamp = draw(stamps(*ANY_STAMP))
-    return Garbage(
-        topic,
-        defect,
-        stamp,
-        tuple(names),
-        (("position", tuple(position)), ("velocity", tuple(velocity)), ("effort", tuple(effort))),
-        expect="out_of_order" if defect == "stale" else "rejected",
-    )
-
-
-SETPOINT_FIELDS = ("positions", "velocities", "accelerations", "effort")
-
-
-@st.composite
-def bad_setpoint(draw: Any) -> Garbage:
-    """Invalid on ``feedforward/setpoint`` (the feedback node)."""
-    defect = draw(
-        st.sampled_from(
-            (
-                "empty",
-                *NAME_DEFECTS,
-                "points0",
-                "points2",
-                *(f"len_{f}" for f in SETPOINT_FIELDS),
-                *(f"bad_{f}" for f in SETPOINT_FIELDS),
-                "tfs_nanosec",
-                "stamp",
-            )
-        )
-    )
-    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
-    cols = {f: vec(draw, N) for f in SETPOINT_FIELDS}
-    n_points = 1
-    tfs_nanosec = 0
-    if defect in NAME_DEFECTS:
-        names = apply_name_defect(draw, defect, names, list(cols.values()))
-    elif defect == "points0":
-        n_points = 0
-    elif defect == "points2":
-        n_points = 2
-    elif defect.startswith("len_"):
-        cols[defect[4:]] = vec(draw, draw(st.sampled_from((0, 1, 2, 4))))
-    elif defect.startswith("bad_"):
-        cols[defect[4:]] = spoil(draw, cols[defect[4:]])
-    elif defect == "tfs_nanosec":
-        tfs_nanosec = draw(st.integers(wire.NS_PER_S, 2**32 - 1))
-    stamp = draw(
-        stamps(*(("neg", "offgrid", "nanosec", "stale") if defect == "stamp" else ANY_STAMP))
-    )
-    point = tuple((f, tuple(v)) for f, v in cols.items())
-    return Garbage(
-        wire.SETPOINT,
-        defect,
-        stamp,
-        tuple(names),
-        points=(point,) * n_points,
-        times_ns=(draw(st.integers(0, 10**9)),) * n_points,
-        tfs_nanosec=tfs_nanosec,
-    )
-
-
-GOAL_FIELDS = ("positions", "velocities", "accelerations")
-
-
-@st.composite
-def bad_goal(draw: Any) -> Garbage:
-    """Invalid on ``feedforward/trajectory`` (the feedforward node)."""
-    defect = draw(
-        st.sampled_from(
-            (
-                "empty",
-                *NAME_DEFECTS,
-                "points0",
-                "times_not_increasing",
-                "first_time_not_positive",
-                "tfs_nanosec",
-                "len_positions",
-                "len_velocities",
-                "len_accelerations",
-                "velocities_some",
-                "bad_positions",
-                "bad_velocities",
-                "bad_accelerations",
-                "out_of_limits",
-                "final_velocity",
-            )
-        )
-    )
-    m = draw(st.integers(2 if defect in ("times_not_increasing", "velocities_some") else 1, 4))
-    names = [NAMES[i] for i in draw(st.permutations(range(N)))]
-    order = [NAMES.index(name) for name in names]
-    times = list(np.cumsum([draw(st.integers(50, 500)) * 1_000_000 for _ in range(m)]))
-    inside = st.floats(0.0, 1.0)
-    points = []
-    with_vel, with_acc = draw(st.booleans()), draw(st.booleans())
-    for j in range(m):
-        pos = [LOWER[i] + 0.1 + draw(inside) * (UPPER[i] - LOWER[i] - 0.2) for i in order]
-        cols = {"positions": pos}
-        if with_vel:
-            cols["velocities"] = [0.0] * N if j == m - 1 else vec(draw, N, st.floats(-1, 1))
-        if with_acc:
-            cols["accelerations"] = vec(draw, N, st.floats(-1, 1))
-        points.append(cols)
-    tfs_nanosec = 0
-    j = draw(st.integers(0, m - 1))
-    if defect in NAME_DEFECTS:
-        defect_cols = [col for p in points for col in p.values()]
-        names = apply_name_defect(draw, defect, names, defect_cols)
-    elif defect == "points0":
-        points, times = [], []
-    elif defect == "times_not_increasing":
-        j = max(j, 1)
-        times[j] = times[j - 1] - draw(st.integers(0, times[j - 1]))
-    elif defect == "first_time_not_positive":
-        times[0] = -draw(st.integers(0, 10**9))
-    elif defect == "tfs_nanosec":
-        tfs_nanosec = draw(st.integers(wire.NS_PER_S, 2**32 - 1))
-    elif defect.startswith("len_"):
-        points[j][defect[4:]] = vec(draw, draw(st.sampled_from((1, 2, 4))))
-    elif defect == "velocities_some":
-        for p in points:
-            p["velocities"] = [0.0] * N
-        del points[j]["velocities"]
-    elif defect.startswith("bad_"):
-        points[j][defect[4:]] = spoil(draw, points[j].get(defect[4:], vec(draw, N)))
-    elif defect == "out_of_limits":
-        i = draw(st.integers(0, N - 1))
-        beyond = draw(st.floats(0.05, 1e5))
-        limit = LOWER[order[i]] - beyond if draw(st.booleans()) else UPPER[order[i]] + beyond
-        points[j]["positions"][i] = limit
-    elif defect == "final_velocity":
-        for p in points:
-            p.setdefault("velocities", [0.0] * N)
-        points[-1]["velocities"][draw(st.integers(0, N - 1))] = draw(st.floats(0.1, 2.0))
-    return Garbage(
-        wire.TRAJECTORY_GOAL,
-        defect,
-        Stamp("rel"),
-        tuple(names),
-        points=tuple(tuple((f, tuple(v)) for f, v in p.items()) for p in points),
-        times_ns=tuple(int(t) for t in times),
-        tfs_nanosec=tfs_nanosec,
-    )
-
-
-BATCH = st.fixed_dictionaries(
-    {
-        wire.JOINT_STATES: st.lists(bad_joint_state(), max_size=5),
-        wire.SETPOINT: st.lists(bad_setpoint(), max_size=5),
-        wire.FEEDFORWARD_TORQUE: st.lists(bad_torque(wire.FEEDFORWARD_TORQUE), max_size=5),
-        wire.FEEDBACK_TORQUE: st.lists(bad_torque(wire.FEEDBACK_TORQUE), max_size=5),
-        wire.TRAJECTORY_GOAL: st.lists(bad_goal(), max_size=3),
-    }
-)
-
-
-# ----------------------------------------------------------------------------------------------
-# Capture: the nodes' own output (frame_id != "fuzz"), and /diagnostics
-# ----------------------------------------------------------------------------------------------
-class Capture:
-    def __init__(self, graph: Graph) -> None:
-        self.node = graph.add(rclpy.create_node("capture", context=graph.context))
-        self.messages: dict[str, dict[int, list[Any]]] = {}
-        self.diagnostics: dict[str, dict[str, str]] = {}
-        for topic, msg_type in (
-            (wire.JOINT_STATES, JointState),
-            (wire.SETPOINT, JointTrajectory),
-            (wire.FEEDFORWARD_TORQUE, JointState),
-            (wire.FEEDBACK_TORQUE, JointState),
-            (wire.ESTIMATE, Float64MultiArray),
-        ):
-            self.messages[topic] = {}
-            self.node.create_subscription(
-                msg_type, topic, lambda m, t=topic: self._take(t, m), DEEP_QOS
-            )
-        self.node.create_subscription(
-            DiagnosticArray, wire.DIAGNOSTICS, self._diag, wire.DIAGNOSTICS_QOS
-        )
-
-    def _take(self, topic: str, msg: Any) -> None:
-        if topic == wire.ESTIMATE:
-            stamp = wire.msg_to_estimate(msg).stamp_ns
-        else:
-            if msg.header.frame_id == FUZZ:
-                return
-            stamp = wire.stamp_to_ns(msg.header.stamp)
-        self.messages[topic].setdefault(stamp, []).append(msg)
-
-    def _diag(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            self.diagnostics[status.name.rsplit("/", 1)[-1]] = {
-                kv.key: kv.value for kv in status.values
-            }
-
-    def hears(self, *topics: str) -> bool:
-        return all(self.node.count_publishers(self.node.resolve_topic_name(t)) >= 1 for t in topics)
-
-    def first(self, topic: str) -> dict[int, Any]:
-        """The first message per stamp; resends of a sample must be identical to it."""
-        out = {}
-        for stamp, msgs in self.messages[topic].items():
-            for other in msgs[1:]:
-                assert other == msgs[0], f"{topic} at {stamp} ns was published twice, differently"
-            out[stamp] = msgs[0]
-        return out
-
-
-def assert_all_finite(capture: Capture) -> None:
-    """Every number every node put on the wire is finite (and within the wire's bound)."""
-    for topic, by_stamp in capture.messages.items():
-        for stamp, msgs in by_stamp.items():
-            for msg in msgs:
-                if topic == wire.ESTIMATE:
-                    values = np.asarray(msg.data)
-                elif topic == wire.SETPOINT:
-                    values = np.concatenate(
-                        [np.asarray(getattr(msg.points[0], f)) for f in SETPOINT_FIELDS]
-                    )
-                else:
-                    values = np.concatenate(
-                        [np.asarray(msg.position), np.asarray(msg.velocity), np.asarray(msg.effort)]
-                    )
-                assert np.all(np.isfinite(values)), f"non-finite value on {topic} at {stamp}"
-                if topic != wire.ESTIMATE:  # trace(P) and the stamp may exceed 1e6
-                    assert np.all(np.abs(values) <= wire.DEFAULT_MAX_ABS), (topic, stamp)
-
-
-def compare_with_offline(capture: Capture, offline: Any) -> None:
-    """Bit for bit: every captured signal equals the offline loop's (the clean run)."""
-    n = len(offline.t)
-    js = capture.first(wire.JOINT_STATES)
-    sp = capture.first(wire.SETPOINT)
-    ff = capture.first(wire.FEEDFORWARD_TORQUE)
-    fb = capture.first(wire.FEEDBACK_TORQUE)
-    est = capture.first(wire.ESTIMATE)
-    stamps_ns = [k * T_NS for k in range(n)]
-    assert sorted(js) == stamps_ns
-    assert sorted(fb) == sorted(est) == stamps_ns
-    # The feedforward runs one sample ahead (lookahead 1): its last set point answers no state.
-    assert sorted(sp) == sorted(ff) == [*stamps_ns, n * T_NS]
-    for k, stamp in enumerate(stamps_ns):
-        s = wire.joint_state_to_arrays(js[stamp], NAMES)
-        np.testing.assert_array_equal(s.position, offline.q[k])
-        np.testing.assert_array_equal(s.velocity, offline.qd[k])
-        if k == 0:
-            assert s.effort is None
-        else:
-            np.testing.assert_array_equal(s.effort, offline.applied[k - 1])
-        p = wire.msg_to_setpoint(sp[stamp], NAMES)
-        for name, got in (("q_d", p.q), ("qd_d", p.qd), ("qdd_d", p.qdd), ("u_n", p.u_n)):
-            np.testing.assert_array_equal(got, getattr(offline, name)[k], err_msg=f"{name}[{k}]")
-        np.testing.assert_array_equal(wire.msg_to_torque(ff[stamp], NAMES).effort, offline.u_n[k])
-        np.testing.assert_array_equal(wire.msg_to_torque(fb[stamp], NAMES).effort, offline.du[k])
-        e = wire.msg_to_estimate(est[stamp])
-        assert e.trace_p == offline.trace_p[k]
-        np.testing.assert_array_equal(e.F, offline.F[k])
-        np.testing.assert_array_equal(e.G, offline.G[k])
-        np.testing.assert_array_equal(e.w, offline.w[k])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -570,10 +51,10 @@ def _start_lockstep(graph: Graph, spec: RunSpec) -> tuple[Any, Any, Any, Capture
     params = spec.node_parameters()
     ctx = graph.context
     ff = graph.add(
-        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+        FeedforwardNode(context=ctx, parameter_overrides=overrides(params["feedforward_node"]))
     )
     fb = graph.add(
-        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+        FeedbackNode(context=ctx, parameter_overrides=overrides(params["feedback_node"]))
     )
     capture = Capture(graph)
     topics = [wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE]
@@ -581,7 +62,7 @@ def _start_lockstep(graph: Graph, spec: RunSpec) -> tuple[Any, Any, Any, Capture
         topics.append(wire.ESTIMATE)
     graph.spin_until(lambda: capture.hears(*topics), what="discovery of the controllers")
     # wait_for_subscribers = 3: ff, fb and the capture listen to joint_states.
-    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params["plant_node"])))
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=overrides(params["plant_node"])))
     return ff, fb, plant, capture
 
 
@@ -688,64 +169,16 @@ def test_fuzz_garbage_on_every_topic_leaves_a_lockstep_run_bit_identical(graph):
 # ----------------------------------------------------------------------------------------------
 # The controllers driven by a stand-in plant: stale/duplicate stamps, extreme goals
 # ----------------------------------------------------------------------------------------------
-class StandInPlant:
-    """Publishes ``joint_states`` (and, optionally, set points) like a plant (and feedforward);
-    records what the controllers answer, by stamp."""
-
-    def __init__(self, graph: Graph) -> None:
-        self.graph = graph
-        self.node = graph.add(rclpy.create_node("stand_in", context=graph.context))
-        self.js_pub = self.node.create_publisher(JointState, wire.JOINT_STATES, DEEP_QOS)
-        self.sp_pub = self.node.create_publisher(JointTrajectory, wire.SETPOINT, DEEP_QOS)
-        self.goal_pub = self.node.create_publisher(
-            JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
-        )
-        self.got: dict[str, dict[int, list[Any]]] = {}
-        for topic, msg_type in (
-            (wire.SETPOINT, JointTrajectory),
-            (wire.FEEDFORWARD_TORQUE, JointState),
-            (wire.FEEDBACK_TORQUE, JointState),
-            (wire.ESTIMATE, Float64MultiArray),
-        ):
-            self.got[topic] = {}
-            self.node.create_subscription(
-                msg_type, topic, lambda m, t=topic: self._take(t, m), DEEP_QOS
-            )
-
-    def _take(self, topic: str, msg: Any) -> None:
-        if topic == wire.ESTIMATE:
-            stamp = wire.msg_to_estimate(msg).stamp_ns
-        elif msg.header.frame_id == FUZZ:
-            return
-        else:
-            stamp = wire.stamp_to_ns(msg.header.stamp)
-        self.got[topic].setdefault(stamp, []).append(msg)
-
-    def count(self, topic: str, stamp_ns: int) -> int:
-        return len(self.got[topic].get(stamp_ns, []))
-
-    def joint_state(self, stamp_ns: int, q: Any, qd: Any, effort: Any = None) -> None:
-        msg = JointState(name=list(NAMES), position=[float(v) for v in q])
-        msg.velocity = [float(v) for v in qd]
-        if effort is not None:
-            msg.effort = [float(v) for v in effort]
-        msg.header.stamp = wire.ns_to_stamp(stamp_ns)
-        self.js_pub.publish(msg)
-
-    def setpoint(self, stamp_ns: int, q_d: Any, qd_d: Any, qdd_d: Any, u_n: Any) -> None:
-        self.sp_pub.publish(wire.setpoint_to_msg(stamp_ns, NAMES, q_d, qd_d, qdd_d, u_n, 0))
-
-
 def test_stale_duplicate_and_off_grid_joint_states(graph):
     """ff and fb: a re-sent sample is answered from the cache (identical output), an older one,
     a negative one and one off the grid are rejected and counted; nothing else is published."""
     params = RunSpec(paper_scenario("a"), "pd").node_parameters()
     ctx = graph.context
     ff = graph.add(
-        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+        FeedforwardNode(context=ctx, parameter_overrides=overrides(params["feedforward_node"]))
     )
     fb = graph.add(
-        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+        FeedbackNode(context=ctx, parameter_overrides=overrides(params["feedback_node"]))
     )
     plant = StandInPlant(graph)
     graph.spin_until(lambda: plant.js_pub.get_subscription_count() >= 2)
@@ -784,38 +217,6 @@ def test_stale_duplicate_and_off_grid_joint_states(graph):
     assert sorted(plant.got[wire.SETPOINT]) == [0, T_NS, 2 * T_NS, 3 * T_NS]
 
 
-def extreme_goal() -> st.SearchStrategy[JointTrajectory]:
-    """Goals that pass the wire's checks but may be absurdly fast: waypoints inside the joint
-    limits (or just outside), 1 ns to 50 ms apart, velocities/accelerations up to 1e5."""
-
-    @st.composite
-    def build(draw: Any) -> JointTrajectory:
-        m = draw(st.integers(1, 3))
-        t = 0
-        msg = JointTrajectory(joint_names=list(NAMES))
-        msg.header.frame_id = FUZZ
-        big = st.one_of(st.floats(-1e5, 1e5), st.sampled_from([-1e5, -1e4, 1e3, 1e4, 1e5]))
-        with_vel, with_acc = draw(st.booleans()), draw(st.booleans())
-        for j in range(m):
-            t += draw(
-                st.one_of(
-                    st.integers(1, 1000),  # ns apart: everything happens between two samples
-                    st.integers(1, 5).map(lambda j: j * T_NS),  # on samples: their values show
-                    st.integers(1, 50_000_000),
-                )
-            )
-            pos = [draw(st.floats(float(LOWER[i]) - 0.2, float(UPPER[i]) + 0.2)) for i in range(N)]
-            point = JointTrajectoryPoint(positions=pos, time_from_start=wire.ns_to_duration(t))
-            if with_vel:
-                point.velocities = [0.0] * N if j == m - 1 else [draw(big) for _ in range(N)]
-            if with_acc:
-                point.accelerations = [draw(big) for _ in range(N)]
-            msg.points.append(point)
-        return msg
-
-    return build()
-
-
 def test_fuzz_extreme_goals_never_put_a_non_finite_value_on_the_wire(graph):
     """Valid-looking but absurd goals (hypothesis): each is rejected or run; every joint state
     is answered with finite set points and torques (ff), and fb either answers with a finite
@@ -823,10 +224,10 @@ def test_fuzz_extreme_goals_never_put_a_non_finite_value_on_the_wire(graph):
     params = RunSpec(paper_scenario("a"), "pd").node_parameters()
     ctx = graph.context
     ff = graph.add(
-        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+        FeedforwardNode(context=ctx, parameter_overrides=overrides(params["feedforward_node"]))
     )
     fb = graph.add(
-        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+        FeedbackNode(context=ctx, parameter_overrides=overrides(params["feedback_node"]))
     )
     plant = StandInPlant(graph)
     graph.spin_until(lambda: plant.goal_pub.get_subscription_count() >= 1)
@@ -900,26 +301,6 @@ def test_fuzz_extreme_goals_never_put_a_non_finite_value_on_the_wire(graph):
 # ----------------------------------------------------------------------------------------------
 # The plant: stamps of torques, duplicates, torque limits
 # ----------------------------------------------------------------------------------------------
-def _stand_in_controllers(graph: Any) -> tuple[Any, Any, dict[int, Any]]:
-    """Publishers of both torques, and the plant's joint states by stamp, for a test that plays
-    the controllers."""
-    helper = graph.add(rclpy.create_node("controllers", context=graph.context))
-    ff_pub = helper.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, DEEP_QOS)
-    fb_pub = helper.create_publisher(JointState, wire.FEEDBACK_TORQUE, DEEP_QOS)
-    states: dict[int, Any] = {}
-    helper.create_subscription(
-        JointState,
-        wire.JOINT_STATES,
-        lambda m: states.setdefault(wire.stamp_to_ns(m.header.stamp), m),
-        DEEP_QOS,
-    )
-    return ff_pub, fb_pub, states
-
-
-def _torque(pub: Any, stamp_ns: int, effort: Any) -> None:
-    pub.publish(wire.torque_to_msg(stamp_ns, NAMES, np.asarray(effort, dtype=float)))
-
-
 def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(graph):
     """Lockstep plant, the test playing both controllers: a torque before sample 0 is sent, in
     the future (a nominal torque: beyond the feedforward's lookahead), off the grid or negative
@@ -934,15 +315,15 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     params = RunSpec(scenario, "none").node_parameters()["plant_node"]
     params.update(wait_for_subscribers=2, n_samples=0, resend_s=30.0, lockstep_timeout_s=30.0)
     ctx = graph.context
-    ff_pub, fb_pub, states = _stand_in_controllers(graph)
-    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(params)))
+    ff_pub, fb_pub, states = stand_in_controllers(graph)
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=overrides(params)))
     graph.spin_until(
         lambda: ff_pub.get_subscription_count() >= 1 and fb_pub.get_subscription_count() >= 1
     )
 
     ff_key, fb_key = f"rejected.{wire.FEEDFORWARD_TORQUE}", f"rejected.{wire.FEEDBACK_TORQUE}"
     # Before the plant sent sample 0 (it waits for a second listener): nobody computed this.
-    _torque(ff_pub, 0, np.zeros(N))
+    torque(ff_pub, 0, np.zeros(N))
     graph.spin_until(lambda: counter(plant, ff_key) == 1)
     assert not plant.started
     graph.add(rclpy.create_node("listener", context=ctx)).create_subscription(
@@ -954,10 +335,10 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     reference = Plant(built.plant_robot, built.plant_config, np.deg2rad(scenario.q_start_deg))
     a = np.array([5.0, 40.0, 10.0])
     # Sample 0: two different feedforward torques; the first stands, nothing is added.
-    _torque(ff_pub, 0, a)
-    _torque(ff_pub, 0, 3.0 * a)
+    torque(ff_pub, 0, a)
+    torque(ff_pub, 0, 3.0 * a)
     graph.spin_until(lambda: counter(plant, f"duplicate.{wire.FEEDFORWARD_TORQUE}") == 1)
-    _torque(fb_pub, 0, np.zeros(N))
+    torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: T_NS in states, what="sample 1")
     step = reference.step(a)
     got = wire.joint_state_to_arrays(
@@ -969,30 +350,30 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
 
     # Sample 1: too far ahead, off grid, negative -> rejected; answers to sample 0 -> stale.
     for stamp in ((wire.MAX_LOOKAHEAD + 2) * T_NS, T_NS + 5, -T_NS):
-        _torque(ff_pub, stamp, a)
-    _torque(ff_pub, 0, a)
-    _torque(fb_pub, 2 * T_NS, np.zeros(N))  # a feedback torque is never ahead of the state
-    _torque(fb_pub, 0, np.zeros(N))
+        torque(ff_pub, stamp, a)
+    torque(ff_pub, 0, a)
+    torque(fb_pub, 2 * T_NS, np.zeros(N))  # a feedback torque is never ahead of the state
+    torque(fb_pub, 0, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDBACK_TORQUE}") == 1)
     graph.spin_until(lambda: counter(plant, ff_key) == 4)
     graph.spin_until(lambda: counter(plant, fb_key) == 1)
     graph.spin_until(lambda: counter(plant, f"stale.{wire.FEEDFORWARD_TORQUE}") == 1)
-    _torque(ff_pub, T_NS, a)
-    _torque(fb_pub, T_NS, np.zeros(N))
+    torque(ff_pub, T_NS, a)
+    torque(fb_pub, T_NS, np.zeros(N))
     graph.spin_until(lambda: 2 * T_NS in states, what="sample 2")
     reference.step(a)
 
     # Sample 2: an answer to sample 0 is out of order; the rejected future torque for sample 2
     # was not kept: with the nominal torque missing the plant does not step.
-    _torque(ff_pub, 0, a)
-    _torque(fb_pub, 2 * T_NS, np.zeros(N))
+    torque(ff_pub, 0, a)
+    torque(fb_pub, 2 * T_NS, np.zeros(N))
     graph.spin_until(lambda: counter(plant, f"out_of_order.{wire.FEEDFORWARD_TORQUE}") == 1)
     graph.spin_for(0.3)
     assert plant.k == 2
     # A huge but valid torque is clipped to the effort limits, and counted.
     huge = np.array([1e5, -1e5, 1e5])
-    _torque(ff_pub, 2 * T_NS, huge)
-    _torque(ff_pub, 3 * T_NS, a)  # one sample ahead, as the feedforward node sends it: kept
+    torque(ff_pub, 2 * T_NS, huge)
+    torque(ff_pub, 3 * T_NS, a)  # one sample ahead, as the feedforward node sends it: kept
     graph.spin_until(lambda: 3 * T_NS in states, what="sample 3")
     limit = built.plant_robot.effort_limit
     applied = wire.joint_state_to_arrays(states[3 * T_NS], NAMES).effort
@@ -1004,7 +385,7 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert counter(plant, "saturated_samples") == 1
     assert all(counter(plant, f"saturated.{name}") == 1 for name in NAMES)
     # Sample 3 needs only its feedback torque now: the nominal one came ahead.
-    _torque(fb_pub, 3 * T_NS, np.zeros(N))
+    torque(fb_pub, 3 * T_NS, np.zeros(N))
     graph.spin_until(lambda: 4 * T_NS in states, what="sample 4")
     np.testing.assert_array_equal(
         wire.joint_state_to_arrays(states[4 * T_NS], NAMES).position, reference.step(a).q
@@ -1022,8 +403,8 @@ def _slow_realtime_plant(graph: Any) -> tuple[Any, Any, Any, dict]:
     """A real-time plant at 10 Hz with the test playing both controllers, after sample 0."""
     params = RunSpec(paper_scenario("a"), "none", mode="realtime").node_parameters()["plant_node"]
     params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
-    ff_pub, fb_pub, states = _stand_in_controllers(graph)
-    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=_overrides(params)))
+    ff_pub, fb_pub, states = stand_in_controllers(graph)
+    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(params)))
     graph.spin_until(lambda: 0 in states, what="sample 0")
     return plant, ff_pub, fb_pub, states
 
@@ -1040,11 +421,11 @@ def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(gr
     feedforward's lookahead), waits for sample 1; sample 0 applies u_n(0)."""
     plant, ff_pub, fb_pub, states = _slow_realtime_plant(graph)
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
-    _torque(ff_pub, 0, a)
-    _torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead
-    _torque(fb_pub, 0, np.zeros(N))
+    torque(ff_pub, 0, a)
+    torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead
+    torque(fb_pub, 0, np.zeros(N))
     np.testing.assert_array_equal(_applied_before(graph, states, 1), a)
-    _torque(fb_pub, SLOW_PERIOD_NS, np.ones(N))
+    torque(fb_pub, SLOW_PERIOD_NS, np.ones(N))
     np.testing.assert_array_equal(_applied_before(graph, states, 2), b + 1.0)
     assert counter(plant, "rejected") == 0 and counter(plant, "watchdog_trips") == 0
     assert errors(plant) == 0
@@ -1083,52 +464,6 @@ def test_torque_limits_hold_in_a_recorded_run(tmp_path):
 # 2. Runtime parameters of the feedback node, end to end through the parameter service (each
 #    rule: test_feedback_node.py; the stamp rules: test_sampling.py)
 # ----------------------------------------------------------------------------------------------
-class ParameterRig:
-    """A feedback node, a stand-in plant + feedforward, and a parameter client (the service)."""
-
-    def __init__(self, graph: Graph, controller: str) -> None:
-        from rclpy.parameter_client import AsyncParameterClient
-
-        params = RunSpec(paper_scenario("a"), controller).node_parameters()
-        self.graph = graph
-        self.fb = graph.add(
-            FeedbackNode(
-                context=graph.context, parameter_overrides=_overrides(params["feedback_node"])
-            )
-        )
-        self.plant = StandInPlant(graph)
-        self.client = AsyncParameterClient(self.plant.node, "feedback_node")
-        graph.spin_until(lambda: self.client.services_are_ready(), what="parameter services")
-        graph.spin_until(lambda: self.plant.sp_pub.get_subscription_count() >= 1)
-        graph.spin_until(lambda: self.plant.node.count_publishers(wire.FEEDBACK_TORQUE) >= 1)
-        self.k = 0
-
-    def set(self, *parameters: Parameter) -> list[Any]:
-        future = self.client.set_parameters(list(parameters))
-        self.graph.spin_until(future.done, what="set_parameters")
-        return list(future.result().results)
-
-    def sample(self, q: Any, qd: Any, q_d: Any, qd_d: Any, u_n: Any) -> Any:
-        """One sample; returns the published du (None if the node refused to publish)."""
-        stamp = self.k * T_NS
-        self.k += 1
-        refused = counter(self.fb, "rejected.feedback_law")
-        self.plant.joint_state(stamp, q, qd)
-        self.plant.setpoint(stamp, q_d, qd_d, np.zeros(N), u_n)
-        self.graph.spin_until(
-            lambda: (
-                self.plant.count(wire.FEEDBACK_TORQUE, stamp) == 1
-                or counter(self.fb, "rejected.feedback_law") > refused
-            )
-        )
-        if not self.plant.count(wire.FEEDBACK_TORQUE, stamp):
-            return None
-        return wire.msg_to_torque(self.plant.got[wire.FEEDBACK_TORQUE][stamp][0], NAMES).effort
-
-
-def assert_refused(results: list[Any], name: str, why: str) -> None:
-    assert len(results) == 1 and not results[0].successful, results
-    assert name in results[0].reason and why in results[0].reason, results[0].reason
 
 
 def test_pd_gains_change_at_run_time_and_bad_values_are_refused(graph):

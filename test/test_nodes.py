@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.parameter import Parameter
+from support.nodes import overrides
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 import apc_msgs_py as wire
@@ -26,19 +26,15 @@ from apc_recording.runs import load_run
 pytestmark = pytest.mark.ros
 
 
-def _overrides(values):
-    return [Parameter(k, value=v) for k, v in values.items()]
-
-
 def test_goal_is_executed_after_the_current_motion(graph):
     """A JointTrajectory goal (joints in another order) starts when the first move ends."""
     scenario = paper_scenario("a", hold_s=0.8)
     params = RunSpec(scenario, "computed_torque").node_parameters()
     ctx = graph.context
     ff = graph.add(
-        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+        FeedforwardNode(context=ctx, parameter_overrides=overrides(params["feedforward_node"]))
     )
-    graph.add(FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"])))
+    graph.add(FeedbackNode(context=ctx, parameter_overrides=overrides(params["feedback_node"])))
     helper = graph.add(rclpy.create_node("goal_sender", context=ctx))
     goal_pub = helper.create_publisher(
         JointTrajectory, wire.TRAJECTORY_GOAL, wire.TRAJECTORY_GOAL_QOS
@@ -66,7 +62,7 @@ def test_goal_is_executed_after_the_current_motion(graph):
     goal_pub.publish(goal)
     graph.spin_until(lambda: ff.diagnostics.counters.get("goals_accepted", 0) == 1)
     plant_params = dict(params["plant_node"], wait_for_subscribers=2)
-    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(plant_params)))
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=overrides(plant_params)))
     graph.spin_until(lambda: plant.done, timeout_s=60)
     assert plant.exit_code == 0
     # Set points 0 .. n_samples, and the lookahead beyond the last joint state.
@@ -88,7 +84,7 @@ def test_bad_goal_is_rejected_and_counted(graph):
     params = RunSpec(paper_scenario("a"), "none").node_parameters()
     ff = graph.add(
         FeedforwardNode(
-            context=graph.context, parameter_overrides=_overrides(params["feedforward_node"])
+            context=graph.context, parameter_overrides=overrides(params["feedforward_node"])
         )
     )
     helper = graph.add(rclpy.create_node("goal_sender", context=graph.context))
@@ -121,13 +117,11 @@ def test_lockstep_missing_peer_ends_with_a_clear_error(graph):
     params = RunSpec(paper_scenario("a"), "none").node_parameters()
     graph.add(
         FeedforwardNode(
-            context=graph.context, parameter_overrides=_overrides(params["feedforward_node"])
+            context=graph.context, parameter_overrides=overrides(params["feedforward_node"])
         )
     )
     plant_params = dict(params["plant_node"], wait_for_subscribers=1, lockstep_timeout_s=1.0)
-    plant = graph.add(
-        PlantNode(context=graph.context, parameter_overrides=_overrides(plant_params))
-    )
+    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(plant_params)))
     t0 = time.monotonic()
     graph.spin_until(lambda: plant.done, timeout_s=10)
     assert time.monotonic() - t0 < 3.0
@@ -139,13 +133,13 @@ def test_lockstep_peer_dying_mid_run_ends_with_a_clear_error(graph):
     params = RunSpec(paper_scenario("a", hold_s=5.0), "none").node_parameters()
     ctx = graph.context
     graph.add(
-        FeedforwardNode(context=ctx, parameter_overrides=_overrides(params["feedforward_node"]))
+        FeedforwardNode(context=ctx, parameter_overrides=overrides(params["feedforward_node"]))
     )
     fb = graph.add(
-        FeedbackNode(context=ctx, parameter_overrides=_overrides(params["feedback_node"]))
+        FeedbackNode(context=ctx, parameter_overrides=overrides(params["feedback_node"]))
     )
     plant_params = dict(params["plant_node"], wait_for_subscribers=2, lockstep_timeout_s=1.0)
-    plant = graph.add(PlantNode(context=ctx, parameter_overrides=_overrides(plant_params)))
+    plant = graph.add(PlantNode(context=ctx, parameter_overrides=overrides(plant_params)))
     graph.spin_until(lambda: plant.k >= 20)
     graph.executor.remove_node(fb)  # the feedback node stops answering
     graph.spin_until(lambda: plant.done, timeout_s=10)

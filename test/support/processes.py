@@ -1,10 +1,18 @@
-"""Node processes of a test: their parameter files, started with their stderr kept, always
-stopped (SIGINT, then SIGTERM, then SIGKILL) when the test ends."""
+"""Node processes of a test: their parameter files, started with their output kept, always
+stopped (SIGINT, then SIGTERM, then SIGKILL) when the test ends.
+
+:func:`node_process` runs one process for the length of a block; :class:`Children` runs the
+nodes of a system test (``python -m <package>.<module>``, as on a robot), each of which the test
+may kill and start again; :func:`wait_all` and :func:`process_group` tell how and whether they
+ended.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import subprocess
+import sys
+import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -12,6 +20,14 @@ from typing import Any
 import yaml
 
 from apc_lab.experiment import stop_processes
+
+#: The module each node runs as (``python -m``), by node name.
+NODE_MODULES = {
+    "plant_node": "apc_plant_sim.node",
+    "feedforward_node": "apc_feedforward.node",
+    "feedback_node": "apc_feedback.node",
+    "recorder": "apc_recording.recorder",
+}
 
 
 def write_params(path: Path, params: Mapping[str, Mapping[str, Any]]) -> Path:
@@ -33,3 +49,99 @@ def node_process(
             yield proc
         finally:
             stop_processes([proc], timeout_s=timeout_s)
+
+
+class Children:
+    """Node processes of one test, by key (the node's name unless ``key`` is given).
+
+    Each runs ``python -m`` its node's module (:data:`NODE_MODULES`), with ``params_file``
+    (but the recorder), behind ``prefix`` (``ip netns exec ...``) and in ``env``; its stdout and
+    stderr go to ``<key>.<n>.out`` / ``.err`` in ``tmp_path``. A node started again under its
+    key replaces the old process, which is kept for :meth:`close`; that stops them all.
+    """
+
+    def __init__(self, tmp_path: Path, params_file: Path | None = None) -> None:
+        self.dir = tmp_path
+        self.params_file = params_file
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.dead: list[subprocess.Popen] = []
+        self._n = 0
+
+    def start(
+        self,
+        name: str,
+        *args: str,
+        prefix: tuple[str, ...] = (),
+        env: dict | None = None,
+        key: str | None = None,
+    ) -> subprocess.Popen:
+        key = key or name
+        self._n += 1
+        ros_args = ["--ros-args"]
+        if self.params_file is not None and name != "recorder":
+            ros_args += ["--params-file", str(self.params_file)]
+        stem = self.dir / f"{key}.{self._n}"
+        with open(f"{stem}.out", "wb") as out, open(f"{stem}.err", "wb") as err:
+            proc = subprocess.Popen(
+                [*prefix, sys.executable, "-m", NODE_MODULES[name], *ros_args, *args],
+                stdout=out,
+                stderr=err,
+                env=env,
+            )
+        proc.stderr_path = Path(f"{stem}.err")  # type: ignore[attr-defined]
+        if key in self.procs:
+            self.dead.append(self.procs[key])
+        self.procs[key] = proc
+        return proc
+
+    def start_controllers(self) -> None:
+        """The feedforward and feedback nodes (the plant is started once they are up)."""
+        self.start("feedforward_node")
+        self.start("feedback_node")
+
+    def kill(self, key: str) -> float:
+        """SIGKILL a node; return the monotonic time of the kill.
+
+        It is not waited for here: reaping a process can take a while (its DDS threads and
+        shared memory are torn down) and the observer must keep spinning meanwhile, or the
+        receive times it records would be late. :meth:`close` reaps it.
+        """
+        proc = self.procs[key]
+        t = time.monotonic()
+        proc.kill()
+        return t
+
+    def stderr(self, key: str) -> str:
+        return self.procs[key].stderr_path.read_text(errors="replace")  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        stop_processes([*self.procs.values(), *self.dead], timeout_s=3.0)
+
+
+def wait_all(procs: dict[str, subprocess.Popen], timeout_s: float) -> dict[str, float]:
+    """Poll until every process has exited; return each one's exit time from now (s)."""
+    t0 = time.monotonic()
+    took: dict[str, float] = {}
+    while len(took) < len(procs) and time.monotonic() - t0 < timeout_s:
+        for name, proc in procs.items():
+            if name not in took and proc.poll() is not None:
+                took[name] = time.monotonic() - t0
+        time.sleep(0.002)
+    return took
+
+
+def process_group(pgid: int) -> list[str]:
+    """Processes (``pid name state``) whose process group is ``pgid``, from ``/proc``."""
+    members = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        name = stat[stat.index("(") + 1 : stat.rindex(")")]
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[2]) == pgid:
+            members.append(f"{entry.name} {name} {fields[0]}")
+    return members
