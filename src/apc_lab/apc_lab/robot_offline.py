@@ -8,11 +8,12 @@ plant, reporting positions only, stamped with its time) cycling every ``driver_m
 checked every T, the loop sampling the feedforward's plan itself, all on one synthetic clock. A
 command leaves when its state arrives and reaches the driver after a latency that
 :class:`Latency` chooses per command (the delay a network or a drive adds, on time or late);
-the driver applies the newest one at its first cycle after that. The 3-joint PUMA 560 with 10 %
-inertia error in the controllers and a payload they do not know; with ``effects`` the arm is
-MuJoCo's with a physical arm's friction, rotor inertia and drive (``robot_sim``'s ``effects``).
+the driver applies the newest one at its first cycle after that. The 3-joint PUMA 560 (or another
+arm, ``arm``) with 10 % inertia error in the controllers and a payload they do not know; with
+``effects`` the arm is MuJoCo's with a physical arm's friction, rotor inertia and drive
+(``robot_sim``'s ``effects``).
 Used by ``test/test_robot_loop.py``, ``test/test_supervisor.py``, ``bench/late_commands.py`` and
-``bench/robot_physical.py``.
+``bench/robot_clock_offline.py``.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.robot import PAPER_START_DEG, Payload, load_robot, with_inertia_error
+from apc_core.robot import Payload, load_robot, with_inertia_error
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -35,15 +36,13 @@ from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
 from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.goals import GoalQueue
-from apc_lab.scenario import CONFIG_DIR
+from apc_lab.scenario import CONFIG_DIR, Scenario
 from apc_msgs_py import JointSample
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import EngineError, PinocchioEngine, make_engine
 from apc_plant_sim.robot_driver import DriverConfig, RobotDriver
 
 MS = 1_000_000  # ns
-#: The driver's command order: not the URDF's, so that the loop's mapping is exercised.
-COMMAND_JOINTS = ("joint_3", "joint_2", "joint_1")
 
 
 @dataclass
@@ -115,6 +114,7 @@ def run_robot_loop(
     supervisor: SupervisorConfig | None = None,
     setup: Callable[[RobotLoop], object] | None = None,
     effects: ArmEffects | None = None,
+    arm: Scenario | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
 
@@ -132,7 +132,8 @@ def run_robot_loop(
         From a state's stamp to its arrival at the loop (ms): its trip and the controllers'
         wake-up; the command computed from it leaves then.
     payload_kg : float
-        The payload at the wrist centre the controllers do not know.
+        The payload the controllers do not know (at the arm's payload frame: the PUMA's wrist
+        centre).
     pause : (start, end), optional
         Seconds after activation during which the driver publishes no states.
     latency : Latency, optional
@@ -149,16 +150,24 @@ def run_robot_loop(
         quantised encoders, the drive's differenced velocity, a drive that adds a cycle), as
         ``robot_sim``'s ``effects: puma560``: the arm is MuJoCo's and its states carry the
         drive's velocity. Default: the ideal arm on apc's plant, positions only.
+    arm : Scenario, optional
+        Another arm: its URDF, locked joints, payload frame, the controllers' inertia error and
+        the start pose (``q_start_deg``); its payload comes from ``payload_kg``. Default: the
+        3-joint PUMA 560 at the paper's start pose, 10 % inertia error.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
-    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
-    controller = with_inertia_error(robot, [0.1, -0.1, 0.1])
-    q0 = np.deg2rad(PAPER_START_DEG)
+    arm = arm or Scenario(urdf=str(CONFIG_DIR / "puma560_3dof.urdf"), payload_frame="wrist_center")
+    robot = load_robot(arm.urdf, gravity=arm.gravity, lock_joints=arm.lock_joints)
+    n = robot.n_joints
+    controller = with_inertia_error(robot, arm.inertia_error)
+    q0 = np.deg2rad(arm.q_start_deg)
+    # The driver's command order: the URDF's reversed, so that the loop's mapping is exercised.
+    command_joints = tuple(reversed(robot.joint_names))
     dt = round(driver_ms * MS)
     # One RK4 step per driver period; no command timeout (a forward_command_controller holds
     # its last command) and positions only, as the robot files' drivers publish.
-    payload = Payload(payload_kg, frame="wrist_center")
+    payload = Payload(payload_kg, com_m=tuple(arm.payload_com_m), frame=arm.payload_frame)
     if effects is None:
         engine = PinocchioEngine(robot, payload, period=dt * 1e-9, max_step=dt * 1e-9, q0=q0)
     else:
@@ -177,7 +186,7 @@ def run_robot_loop(
         DriverConfig(
             state_rate=1e9 / dt,
             command_timeout=duration_s + 1.0,
-            command_joints=COMMAND_JOINTS,
+            command_joints=command_joints,
             publish_velocity=effects is not None,
             publish_effort=False,
             sensing=effects if effects is not None else ArmEffects(),
@@ -187,17 +196,17 @@ def run_robot_loop(
     counts: Counter = Counter()
     lines: list[tuple[str, str]] = []
     config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
-    tolerance = np.full(3, 0.2)
+    tolerance = np.full(n, 0.2)
     supervision = {}
     if supervisor is not None and supervisor.enable:
         supervision = {
-            "supervisor": Supervisor(supervisor, 3, T),
+            "supervisor": Supervisor(supervisor, n, T),
             "fallback": fallback_law(supervisor, controller, T),
         }
     loop = RobotLoop(
         law=AdaptiveFeedback(controller.model, config),
         sampling=RobotSamplingConfig(period=T),
-        command=CommandMap(robot.joint_names, COMMAND_JOINTS, robot.effort_limit),
+        command=CommandMap(robot.joint_names, command_joints, robot.effort_limit),
         plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,

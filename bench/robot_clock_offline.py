@@ -1,0 +1,163 @@
+"""The wall-time robot grid's cells in simulated time: robot mode's loop closed offline.
+
+:func:`apc_lab.robot_offline.run_robot_loop`, no ROS, deterministic: the 3-joint PUMA 560 and
+the Franka Panda (``robot_compare``'s arms, 5 lb the controllers do not know, 10 % inertia
+error), robot mode at T = 10 ms sampling on the states' arrival, case (c)'s move 0.2 s after
+activation. ``ideal``: apc's plant, positions only (the robot files' drivers); ``physical``:
+the arm in MuJoCo with every effect of ``robot_sim``'s ``effects: puma560`` / ``panda``
+(friction, rotor inertia on the PUMA, quantised encoders, the drive's differenced velocity
+published, a drive that adds one cycle). Per driver rate (100 Hz-1 kHz), commands either all
+on time (each reaches the drive before its next cycle) or 30 % of them one driver cycle late
+(``Latency(late_ms=driver period, probability=0.3)``: the jitter of a loaded machine, which
+wall time has and simulated time has not), and per law: the recommended preset alone,
+supervised with the computed-torque fallback (the default) and with the PID fallback.
+
+A physical arm's run is chaotic in its inputs: the payload's fifth digit can move the worst
+error from 1 to 45 deg. So every cell is five runs that differ as real runs do, the payload
+within ±1 % (:data:`PAYLOAD_FACTORS`) and, with late commands, the draws (seeds 0-4), and
+reports the median and the worst run's max error over the joints, the worst final error
+(deg, at the samples), the runs beyond 10 deg ("lost", the wall-time benchmark's rule) and the
+runs with a hand-over. About a minute and a half on one core.
+
+    .venv/bin/python bench/robot_clock_offline.py [--arms puma3 panda] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from apc_feedback.supervisor import SupervisorConfig
+from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
+from apc_lab.robot_offline import Latency, run_robot_loop
+
+ARMS = ("puma3", "panda")
+EFFECTS = ("ideal", "physical")
+RATES_HZ = (100, 250, 500, 1000)
+#: The runs of a cell: the payload times these (run i also draws late commands with seed i).
+PAYLOAD_FACTORS = (1.0, 0.99, 0.995, 1.005, 1.01)
+LOST_DEG = 10.0
+#: law label -> supervisor (None: the adaptive law alone).
+LAWS: dict[str, SupervisorConfig | None] = {
+    "adaptive alone": None,
+    "supervised, computed-torque fallback": SupervisorConfig(),
+    "supervised, PID fallback": SupervisorConfig(fallback="pid"),
+}
+
+
+def one_run(
+    arm: str,
+    effects: str,
+    rate_hz: float,
+    late: bool,
+    index: int,
+    supervisor: SupervisorConfig | None,
+) -> dict:
+    """Run ``index`` of a cell: max and final error per joint (deg), hand-overs."""
+    scenario = arm_scenario(arm, "c")
+    driver_ms = 1000.0 / rate_hz
+    run = run_robot_loop(
+        2.5,
+        goal_deg=scenario.q_goal_deg,
+        driver_ms=driver_ms,
+        phase_ms=0.37 * driver_ms,
+        transport_ms=0.3 * min(1.0, driver_ms),
+        payload_kg=scenario.payload_kg * PAYLOAD_FACTORS[index],
+        latency=Latency(late_ms=driver_ms, probability=0.3, seed=index) if late else None,
+        supervisor=supervisor,
+        effects=ARM_EFFECTS[arm]() if effects == "physical" else None,
+        arm=scenario,
+    )
+    errors = np.array([np.rad2deg(np.abs(e[1] - e[2])) for e in run.log if len(e) == 3])
+    return {
+        "max_deg": errors.max(axis=0).round(3).tolist(),
+        "final_deg": errors[-1].round(3).tolist(),
+        "handovers": run.counts.get("supervisor.handovers", 0),
+    }
+
+
+def measure(arms: tuple[str, ...] = ARMS) -> list[dict]:
+    cells = []
+    for arm in arms:
+        for effects in EFFECTS:
+            for rate in RATES_HZ:
+                for late in (False, True):
+                    for law, supervisor in LAWS.items():
+                        runs = [
+                            one_run(arm, effects, rate, late, i, supervisor)
+                            for i in range(len(PAYLOAD_FACTORS))
+                        ]
+                        worst = [max(r["max_deg"]) for r in runs]
+                        cell = {
+                            "arm": arm,
+                            "effects": effects,
+                            "rate_hz": rate,
+                            "commands": "30 % one cycle late" if late else "on time",
+                            "law": law,
+                            "max_deg": max(worst),
+                            "median_max_deg": float(np.median(worst)),
+                            "final_deg": max(max(r["final_deg"]) for r in runs),
+                            "lost": sum(w > LOST_DEG for w in worst),
+                            "runs": len(runs),
+                            "handover_runs": sum(r["handovers"] > 0 for r in runs),
+                        }
+                        cells.append(cell)
+                        print(
+                            f"{arm:6s} {effects:9s} {rate:5d} Hz {cell['commands']:20s} "
+                            f"{law:37s} median {cell['median_max_deg']:8.2f} worst "
+                            f"{cell['max_deg']:8.2f} / {cell['final_deg']:7.2f}  lost "
+                            f"{cell['lost']}/{cell['runs']}  hand-overs in "
+                            f"{cell['handover_runs']}",
+                            flush=True,
+                        )
+    return cells
+
+
+def _deg(value: float) -> str:
+    return "lost" if value >= 1000.0 else f"{value:.2f}" if value < 100.0 else f"{value:.0f}"
+
+
+def _entry(cell: dict) -> str:
+    """``median; worst max / final`` and what went wrong, e.g. ``1.01; 7.02 / 0.03 (1 h)``."""
+    text = f"{_deg(cell['median_max_deg'])}; {_deg(cell['max_deg'])} / {_deg(cell['final_deg'])}"
+    notes = []
+    if cell["lost"]:
+        notes.append(f"lost {cell['lost']}")
+    if cell["handover_runs"]:
+        notes.append(f"{cell['handover_runs']} h")
+    return text + (f" ({', '.join(notes)})" if notes else "")
+
+
+def markdown(cells: list[dict]) -> str:
+    """One row per arm, effects, rate and timing of the commands; one column per law."""
+    lines = [
+        "| arm | effects | driver | commands | " + " | ".join(LAWS) + " |",
+        "|---|---|---|---|" + "---|" * len(LAWS),
+    ]
+    rows: dict[tuple, dict[str, dict]] = {}
+    for c in cells:
+        rows.setdefault((c["arm"], c["effects"], c["rate_hz"], c["commands"]), {})[c["law"]] = c
+    for (arm, effects, rate, commands), laws in rows.items():
+        entries = " | ".join(_entry(laws[law]) for law in LAWS)
+        lines.append(f"| {arm} | {effects} | {rate} Hz | {commands} | {entries} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--json", type=Path, help="write the cells here")
+    args = parser.parse_args()
+    cells = measure(tuple(args.arms))
+    print()
+    print(markdown(cells), end="")
+    if args.json:
+        doc = {"simulated_time": True, "cells": cells}
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
