@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from apc_lab.loop_timing import latency_stats  # noqa: F401  (re-exported for the benchmarks)
+
 BENCH_DIR = Path(__file__).resolve().parent
 REPO = BENCH_DIR.parent
 CONFIG = REPO / "config"
@@ -50,23 +52,6 @@ def stats(values: Iterable[float], digits: int = 4) -> dict[str, Any]:
         "q3": r(p[3]),
         "min": r(a.min()),
         "max": r(a.max()),
-        "n": int(a.size),
-    }
-
-
-def latency_stats(seconds: Iterable[float]) -> dict[str, Any]:
-    """Per-sample latency in microseconds: median, p90, p99, max over all samples."""
-    a = 1e6 * np.asarray(list(seconds), dtype=float)
-    a = a[np.isfinite(a)]
-    if a.size == 0:
-        return {"median": None, "n": 0}
-    p = np.percentile(a, [10, 50, 90, 99])
-    return {
-        "median": round(float(p[1]), 1),
-        "p10": round(float(p[0]), 1),
-        "p90": round(float(p[2]), 1),
-        "p99": round(float(p[3]), 1),
-        "max": round(float(a.max()), 1),
         "n": int(a.size),
     }
 

@@ -10,6 +10,8 @@ from typing import Any
 
 import benchlib
 
+from apc_lab import wall_clock
+
 PAPER_MS = 7.5  # config/reference/paper.json: pdp11_45_ms_per_setpoint_n3
 
 
@@ -362,9 +364,7 @@ def markdown(d: dict[str, Any]) -> str:
 
     clock = d.get("robot_clock")
     if clock:
-        import robot_clock  # bench/robot_clock.py (bench/ is on sys.path)
-
-        lines += ["", robot_clock.markdown(clock, heading="##").rstrip()]
+        lines += ["", wall_clock.markdown(clock, heading="##").rstrip()]
 
     ma = d.get("multi_arm")
     if ma:

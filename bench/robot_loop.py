@@ -25,6 +25,9 @@ first command:
 - ``max_deviation_deg``: the largest deviation of a sampled position from the first, per run
   (the law holds the arm).
 
+The figures come from the processes' records by :mod:`apc_lab.loop_timing`; this script starts
+the processes and collects the records.
+
     .venv/bin/python bench/robot_loop.py [--seconds 10] [--runs 3] [--quick]
         [--controller adaptive] [--no-write]
 """
@@ -33,29 +36,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
 import tempfile
 import time
-from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import benchlib
-import numpy as np
 
 from apc_core.robot import PAPER_START_DEG
+from apc_lab.loop_timing import LAYOUTS, RATE_HZ, run_samples, summary
 
 ROBOT_PROC = benchlib.BENCH_DIR / "robot_proc.py"
 CONTROLLERS_FILE = benchlib.CONFIG / "puma560_3dof_robot.yaml"
-RATE_HZ = 1000
-#: layout -> phase of robot_node's activation after a joint state's stamp (s). Samples are
-#: taken on the states' arrival, so the phase should not matter; ``late_phase`` checks that it
-#: does not. ``robot_node`` with ``autostart`` activates wherever its start falls.
-LAYOUTS: dict[str, float] = {"robot_node": 0.0, "late_phase": 0.6e-3}
 #: The law at T = 1 ms: the adaptive law with the recommended preset, the robot file's. Its
 #: weights are per sample and its horizon three samples; they carry over from T = 10 ms to
 #: 1 ms (``test_robot_loop``'s periods test, simulated time).
@@ -145,116 +141,6 @@ class RobotRun:
 
     def log_tail(self, lines: int = 5) -> str:
         return benchlib.log_tail(self.workdir, self.tag, lines)
-
-
-# ---------------------------------------------------------------------------------- analysis
-COUNTERS = (
-    "samples_taken",
-    "missed_samples",
-    "missed_setpoint",
-    "late_setpoints",
-    "watchdog",
-    "stale",
-)
-
-
-def run_samples(
-    driver: dict[str, Any], controller: dict[str, Any], warmup_s: float, seconds: float
-) -> dict[str, Any]:
-    """One run's figures per driver cycle and per command, over the window
-    ``[first command + warmup_s, + seconds)`` (times in s from the first command)."""
-    arrivals = driver["commands"]
-    if not arrivals or not driver["cycles"]:
-        raise RuntimeError("the driver took no command")
-    # Relative times: a float64 of ~1.8e9 s resolves only ~0.24 us.
-    t0 = arrivals[0][1]
-    t0_ns = round(t0 * 1e9)
-    cycles = np.asarray([c[0] for c in driver["cycles"]], dtype=float) - t0
-    held = np.asarray([c[1] for c in driver["cycles"]], dtype=bool)
-    window = (cycles >= warmup_s) & (cycles < warmup_s + seconds)
-    # The command each arrival is: by its data (floats cross DDS bit for bit).
-    # Equal data (a command clipped to the limits, a still arm) arrive in the order sent.
-    sent: dict[tuple[float, ...], deque[tuple[int, int]]] = {}
-    duplicates = 0
-    for data, state_ns, tick_ns, _publish_ns in controller["sent"]:
-        queue = sent.setdefault(tuple(data), deque())
-        duplicates += bool(queue)
-        queue.append((state_ns, tick_ns))
-    latency, age, trip, late_next = [], [], [], []
-    unmatched = 0
-    period = 1.0 / RATE_HZ
-    for data, arrival_abs in arrivals:
-        queue = sent.get(tuple(data))
-        match = queue.popleft() if queue else None
-        arrival = arrival_abs - t0
-        if not warmup_s <= arrival < warmup_s + seconds:
-            continue
-        if match is None or match[0] < 0:
-            unmatched += 1
-            continue
-        state, tick = (match[0] - t0_ns) * 1e-9, (match[1] - t0_ns) * 1e-9
-        latency.append(arrival - state)
-        age.append(tick - state)
-        trip.append(arrival - tick)
-        # The driver's next cycle after the one that read the state (stamped at its time).
-        i = int(np.searchsorted(cycles, state + 0.5 * period))
-        if i < cycles.size:  # else the run ended before that cycle
-            late_next.append(arrival > cycles[i])
-    counters = controller.get("counters", {})
-    return {
-        "held": held[window],
-        "intervals": np.diff(cycles[window]),
-        "latency": np.asarray(latency),
-        "age": np.asarray(age),
-        "trip": np.asarray(trip),
-        "late_next": np.asarray(late_next, dtype=bool),
-        "unmatched": unmatched,
-        "duplicates": duplicates,
-        "counters": {
-            k: v for k, v in counters.items() if k in COUNTERS or k.startswith("supervisor.")
-        },
-        "max_deviation_deg": math.degrees(controller.get("max_deviation_rad", math.nan)),
-    }
-
-
-def summary(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """The runs pooled: late fraction, latencies, and per run what sets them apart."""
-    held = np.concatenate([r["held"] for r in runs])
-    intervals = np.concatenate([r["intervals"] for r in runs])
-    late_next = np.concatenate([r["late_next"] for r in runs])
-    latency = np.concatenate([r["latency"] for r in runs])
-    counters: dict[str, int] = {}
-    for r in runs:
-        for k, v in r["counters"].items():
-            counters[k] = counters.get(k, 0) + v
-    return {
-        "late_fraction": round(float(held.mean()), 5) if held.size else None,
-        "held_cycles": int(held.sum()),
-        "cycles": int(held.size),
-        "late_fraction_per_run": [round(float(r["held"].mean()), 4) for r in runs],
-        "state_age_median_us_per_run": [
-            round(float(1e6 * np.median(r["age"])), 1) if r["age"].size else None for r in runs
-        ],
-        "achieved_hz": round(float(1.0 / intervals.mean()), 1) if intervals.size else None,
-        "cycle_interval_us": benchlib.latency_stats(intervals),
-        "latency_us": benchlib.latency_stats(latency),
-        "state_age_at_sample_us": benchlib.latency_stats(np.concatenate([r["age"] for r in runs])),
-        "sample_to_arrival_us": benchlib.latency_stats(np.concatenate([r["trip"] for r in runs])),
-        "late_after_next_cycle": round(float(late_next.mean()), 5) if late_next.size else None,
-        "commands_matched": int(latency.size),
-        "commands_unmatched": sum(r["unmatched"] for r in runs),
-        "duplicate_commands": sum(r["duplicates"] for r in runs),
-        "controller_counters": counters,
-        "max_deviation_deg_per_run": [round(r["max_deviation_deg"], 3) for r in runs],
-        "runs": len(runs),
-    }
-
-
-def analyse(
-    driver: dict[str, Any], controller: dict[str, Any], warmup_s: float, seconds: float
-) -> dict[str, Any]:
-    """One run's summary (see :func:`run_samples`)."""
-    return summary([run_samples(driver, controller, warmup_s, seconds)])
 
 
 def measure(

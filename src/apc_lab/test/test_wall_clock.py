@@ -1,20 +1,15 @@
-"""``bench/robot_clock.py``'s pure parts on synthetic runs: errors, the loss rule, the cells,
-the table and the processes' parameters (the benchmark itself runs on wall time: not here)."""
+"""The robot path on wall time (``bench/robot_clock.py``'s analysis) on synthetic runs: errors,
+the loss rule, the cells, the table and the processes' parameters (the benchmark itself runs on
+wall time: not here)."""
 
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-
-import robot_clock  # noqa: E402
+from apc_lab import wall_clock
 
 T_NS = 10_000_000  # 10 ms sample grid
 K0 = 1_000  # the first sample's index: stamps are kT on the driver's (system) clock
@@ -39,55 +34,55 @@ def test_errors_span_the_move_from_the_sample_before_it_to_its_planned_end():
     # Hold 0-4, move 5-14 (0.1 s from sample 4), hold after to 19.
     errors = {2: [3.0, 0.0], 4: [0.5, 0.25], 9: [2.0, 1.0], 14: [0.1, 0.2], 18: [4.0, 0.0]}
     q, q_d, qd_d = _run(errors, range(5, 14), range(20))
-    out = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    out = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert out["started"] and out["completed"] and out["samples"] == 20
     # Sample 2 (before the move) and 18 (after its end) are outside the move's window ...
     assert out["max_error_deg"] == pytest.approx([2.0, 1.0])
     assert out["final_error_deg"] == pytest.approx([0.1, 0.2])  # sample 14 = 4 + 10
     # ... but not outside the run's.
     assert out["run_max_error_deg"] == pytest.approx([4.0, 1.0])
-    assert not robot_clock.is_lost(out) and out["beyond_limit_at_s"] is None
-    assert robot_clock.run_errors(q, q_d, qd_d, T_NS, 0.1, limit_deg=2.5)[
+    assert not wall_clock.is_lost(out) and out["beyond_limit_at_s"] is None
+    assert wall_clock.run_errors(q, q_d, qd_d, T_NS, 0.1, limit_deg=2.5)[
         "beyond_limit_at_s"
     ] == pytest.approx(-0.02)  # sample 2, in the hold before the move
 
 
 def test_a_run_is_lost_beyond_ten_degrees_anywhere_or_when_its_move_end_is_never_sampled():
     q, q_d, qd_d = _run({17: [0.0, 10.5]}, range(5, 14), range(20))
-    after_the_move = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    after_the_move = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert after_the_move["max_error_deg"] == pytest.approx([0.0, 0.0])
-    assert robot_clock.is_lost(after_the_move)
+    assert wall_clock.is_lost(after_the_move)
     assert after_the_move["beyond_limit_at_s"] == pytest.approx(0.13)  # sample 17 - 4
 
     q, q_d, qd_d = _run({}, range(5, 14), range(12))  # samples stop before the move's end
-    cut = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    cut = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert cut["started"] and not cut["completed"] and cut["final_error_deg"] is None
-    assert robot_clock.is_lost(cut)
+    assert wall_clock.is_lost(cut)
 
     q, q_d, qd_d = _run({}, range(0), range(12))  # the goal never arrived
-    still = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
-    assert not still["started"] and robot_clock.is_lost(still)
+    still = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    assert not still["started"] and wall_clock.is_lost(still)
 
-    assert robot_clock.is_lost(robot_clock.run_errors({}, {}, {}, T_NS, move_s=0.1))
+    assert wall_clock.is_lost(wall_clock.run_errors({}, {}, {}, T_NS, move_s=0.1))
 
 
 def test_a_non_finite_position_is_an_infinite_error_and_loses_the_run():
     q, q_d, qd_d = _run({}, range(5, 14), range(20))
     q[(K0 + 16) * T_NS] = [math.nan, -0.3]
-    out = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
-    assert out["run_max_error_deg"][0] == math.inf and robot_clock.is_lost(out)
+    out = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    assert out["run_max_error_deg"][0] == math.inf and wall_clock.is_lost(out)
 
 
 def test_exactly_ten_degrees_is_not_lost():
     q, q_d, qd_d = _run({9: [10.0, 0.0]}, range(5, 14), range(20))
-    out = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    out = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert out["max_error_deg"][0] == pytest.approx(10.0)
-    assert not robot_clock.is_lost({**out, "run_max_error_deg": [10.0, 0.0]})
-    assert robot_clock.is_lost({**out, "run_max_error_deg": [10.001, 0.0]})
+    assert not wall_clock.is_lost({**out, "run_max_error_deg": [10.0, 0.0]})
+    assert wall_clock.is_lost({**out, "run_max_error_deg": [10.001, 0.0]})
 
 
 def test_supervisor_counts_read_every_integer_supervisor_key_and_default_to_zero():
-    assert robot_clock.supervisor_counts({"samples_taken": "250", "watchdog": "0"}) == {
+    assert wall_clock.supervisor_counts({"samples_taken": "250", "watchdog": "0"}) == {
         "supervisor.handovers": 0,
         "supervisor.handbacks": 0,
     }
@@ -97,7 +92,7 @@ def test_supervisor_counts_read_every_integer_supervisor_key_and_default_to_zero
         "supervisor.active_law": "pid",  # a state, not a counter
         "missed_samples": "3",
     }
-    assert robot_clock.supervisor_counts(values) == {
+    assert wall_clock.supervisor_counts(values) == {
         "supervisor.handovers": 2,
         "supervisor.handbacks": 0,
         "supervisor.tracking_error": 1,
@@ -124,7 +119,7 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
         _result([0.7, 0.1, 2.0], None, True),  # move not finished: no final error
         {"failed": "timed out after 60 s waiting for robot_node's topics", "lost": None},
     ]
-    cell = robot_clock.aggregate_cell(runs)
+    cell = wall_clock.aggregate_cell(runs)
     assert cell["runs"] == 4 and cell["failed"] == 1 and cell["lost"] == 2
     assert cell["worst_max_error_deg"] == pytest.approx([1.0, 0.9, 12.0])
     assert cell["worst_final_error_deg"] == pytest.approx([0.3, 0.0, 0.4])
@@ -137,9 +132,9 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
     }
     assert cell["other_cores_max"] is None  # no run said how busy the machine was
     runs[0]["machine_load"], runs[1]["machine_load"] = {"other_cores": 0.3}, {"other_cores": 0.9}
-    assert robot_clock.aggregate_cell(runs)["other_cores_max"] == 0.9
+    assert wall_clock.aggregate_cell(runs)["other_cores_max"] == 0.9
 
-    nothing = robot_clock.aggregate_cell([runs[3]])
+    nothing = wall_clock.aggregate_cell([runs[3]])
     assert nothing["worst_max_error_deg"] is None and nothing["lost"] == 0
 
 
@@ -159,12 +154,12 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
                 "effects": "physical",
                 "rate_hz": 250.0,
                 "law": "adaptive recommended",
-                "summary": robot_clock.aggregate_cell(runs),
+                "summary": wall_clock.aggregate_cell(runs),
                 "runs": runs,
             }
         ],
     }
-    text = robot_clock.markdown(result)
+    text = wall_clock.markdown(result)
     assert "Wall time" in text and "Test CPU 9000, 2 cores" in text and "0.4 cores" in text
     row = "| puma3 | physical | 250 | adaptive recommended | 0/2 / 1 | 1.00 0.25 3.00 "
     assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | 0 / 0 / 0 / 0 | - |" in text
@@ -172,13 +167,13 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
 
 
 def test_the_plan_covers_every_rate_arm_effect_and_law():
-    cells = robot_clock.plan(
-        robot_clock.ARMS, robot_clock.EFFECTS, robot_clock.RATES_HZ, tuple(robot_clock.LAWS)
+    cells = wall_clock.plan(
+        wall_clock.ARMS, wall_clock.EFFECTS, wall_clock.RATES_HZ, tuple(wall_clock.LAWS)
     )
     # three laws everywhere, the robot file's own law on the Panda only (its q_velocity)
     assert len(cells) == len(set(cells)) == 4 * 2 * 2 * 3 + 4 * 2
     assert {c[2] for c in cells} == {100.0, 250.0, 500.0, 1000.0}
-    assert {c[0] for c in cells if c[3] == robot_clock.ROBOT_FILE_LAW} == {"panda"}
+    assert {c[0] for c in cells if c[3] == wall_clock.ROBOT_FILE_LAW} == {"panda"}
 
 
 def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override():
@@ -187,24 +182,24 @@ def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override()
 
     preset = law_parameters("adaptive", PRESETS["recommended"]())["adaptive.q_velocity"]
     assert preset != 10.0  # the Panda file's value
-    args = robot_clock.controller_arguments("panda", "adaptive recommended")
+    args = wall_clock.controller_arguments("panda", "adaptive recommended")
     assert f"robot_node:adaptive.q_velocity:={preset!r}" in args
     assert 'robot_node:controller:="adaptive"' in args
     assert "robot_node:autostart:=false" in args and "robot_node:path_tolerance:=[0.0]" in args
-    shipped = robot_clock.controller_arguments("panda", robot_clock.ROBOT_FILE_LAW)
+    shipped = wall_clock.controller_arguments("panda", wall_clock.ROBOT_FILE_LAW)
     assert not any("adaptive." in a for a in shipped)  # the file's own values stand
-    pid = robot_clock.controller_arguments("panda", "PID")
+    pid = wall_clock.controller_arguments("panda", "PID")
     assert 'robot_node:controller:="pid"' in pid
     assert not any("adaptive." in a for a in pid)
 
 
 def test_robot_sim_runs_case_c_on_wall_time_at_the_cells_rate():
-    puma = robot_clock.robot_sim_parameters("puma3", "physical", 250.0)
+    puma = wall_clock.robot_sim_parameters("puma3", "physical", 250.0)
     assert puma["state_rate"] == 250.0 and puma["sim_time"] is False
     assert puma["engine"] == "mujoco" and puma["effects"] == "puma560"
     assert puma["payload.mass_kg"] == pytest.approx(5 * 0.45359237)  # 5 lb
     assert puma["payload.frame"] == "wrist_center" and puma["payload.at_s"] == 0.0
-    panda = robot_clock.robot_sim_parameters("panda", "ideal", 1000.0)
+    panda = wall_clock.robot_sim_parameters("panda", "ideal", 1000.0)
     assert panda["effects"] == "ideal" and panda["state_rate"] == 1000.0
     assert panda["sim_cycles_per_command"] == 10
 
@@ -213,18 +208,5 @@ def test_a_missed_sample_at_the_moves_end_leaves_the_final_error_at_the_one_befo
     q, q_d, qd_d = _run({13: [0.5, 0.0], 14: [9.0, 0.0]}, range(5, 14), range(20))
     for table in (q, q_d, qd_d):
         del table[(K0 + 14) * T_NS]
-    out = robot_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
+    out = wall_clock.run_errors(q, q_d, qd_d, T_NS, move_s=0.1)
     assert out["completed"] and out["final_error_deg"] == pytest.approx([0.5, 0.0])
-
-
-def test_results_md_carries_the_table_when_results_json_has_the_part():
-    import report  # bench/report.py
-
-    runs = [_result([1.0, 0.25, 3.0], [0.1, 0.0, 0.4], False)]
-    cell = {"arm": "puma3", "effects": "ideal", "rate_hz": 100.0, "law": "PID", "runs": runs}
-    text = report.markdown(
-        {"robot_clock": {"cells": [{**cell, "summary": robot_clock.aggregate_cell(runs)}]}}
-    )
-    assert "## Robot path on wall time" in text
-    assert "| puma3 | ideal | 100 | PID | 0/1 / 0 | 1.00 0.25 3.00 |" in text
-    assert "Robot path on wall time" not in report.markdown({})
