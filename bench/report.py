@@ -5,7 +5,9 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 import benchlib
@@ -473,13 +475,17 @@ def markdown(d: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> int:
-    data = benchlib.read_results()
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="bench/results.md from bench/results.json")
+    parser.add_argument("--json", type=Path, default=benchlib.RESULTS_JSON, help="results to read")
+    parser.add_argument("--md", type=Path, default=benchlib.RESULTS_MD, help="report to write")
+    args = parser.parse_args(argv)
+    data = benchlib.read_results(args.json)
     if not data:
-        print("bench/results.json is missing; run bench/run_all.py", file=sys.stderr)
+        print(f"{args.json} is missing; run bench/run_all.py", file=sys.stderr)
         return 1
-    benchlib.RESULTS_MD.write_text(markdown(data))
-    print(benchlib.RESULTS_MD.read_text())
+    args.md.write_text(markdown(data))
+    print(args.md.read_text())
     return 0
 
 
