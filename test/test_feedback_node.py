@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
+from support.nodes import counter, overrides
 
 import apc_msgs_py as wire
 from apc_core.nodeutil import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
@@ -52,13 +53,10 @@ def context():
 def node_of(context):
     made = []
 
-    def make(controller: str, **overrides) -> FeedbackNode:
+    def make(controller: str, **values) -> FeedbackNode:
         params = {**RunSpec(paper_scenario("a"), controller).node_parameters()["feedback_node"]}
-        params.update(overrides)
-        node = FeedbackNode(
-            context=context,
-            parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
-        )
+        params.update(values)
+        node = FeedbackNode(context=context, parameter_overrides=overrides(params))
         made.append(node)
         node.torque_pub, node.estimate_pub = Recorder(), Recorder()
         return node
@@ -66,10 +64,6 @@ def node_of(context):
     yield make
     for node in made:
         node.destroy_node()
-
-
-def count(node: FeedbackNode, key: str) -> int:
-    return node.diagnostics.counters.get(key, 0)
 
 
 def joint_state(node, stamp: int, q, qd=None) -> None:
@@ -92,29 +86,29 @@ def test_every_verdict_reaches_its_counter_or_publisher(node_of):
     q_d, e = np.array([0.1, -0.2, 0.3]), np.array([0.01, -0.02, 0.03])
     joint_state(fb, 0, q_d - e)
     joint_state(fb, 0, q_d + e)  # the first one stands
-    assert count(fb, "duplicate.joint_states") == 1 and not fb.torque_pub.sent
+    assert counter(fb, "duplicate.joint_states") == 1 and not fb.torque_pub.sent
     setpoint(fb, 0, q_d)
     np.testing.assert_array_equal(
         torques(fb), [100.0 * (q_d - (q_d - e))]
     )  # Kp (q_d - q), first state
     joint_state(fb, T, q_d)
     setpoint(fb, T, q_d)
-    assert len(fb.torque_pub.sent) == 2 and count(fb, "samples") == 2
+    assert len(fb.torque_pub.sent) == 2 and counter(fb, "samples") == 2
     setpoint(fb, 0, q_d)  # copies of set points used: the feedforward answering a resend
     setpoint(fb, T, q_d)
-    assert count(fb, "resent.feedforward/setpoint") == 2
+    assert counter(fb, "resent.feedforward/setpoint") == 2
     setpoint(fb, T, q_d + e)
-    assert count(fb, "duplicate.feedforward/setpoint") == 1
+    assert counter(fb, "duplicate.feedforward/setpoint") == 1
     setpoint(fb, 0, q_d + e)
     setpoint(fb, T // 2, q_d)
-    assert count(fb, "rejected.feedforward/setpoint") == 2
+    assert counter(fb, "rejected.feedforward/setpoint") == 2
     joint_state(fb, T, q_d + e)  # a resend: answered with the torque already published
-    assert count(fb, "resent") == 1
+    assert counter(fb, "resent") == 1
     assert len(fb.torque_pub.sent) == 3 and fb.torque_pub.sent[2] is fb.torque_pub.sent[1]
     for stamp in (0, -T, T + 1):
         joint_state(fb, stamp, q_d)
-    assert count(fb, "rejected.joint_states") == 3
-    assert count(fb, "rejected") == 5 and count(fb, "callback_errors") == 0
+    assert counter(fb, "rejected.joint_states") == 3
+    assert counter(fb, "rejected") == 5 and counter(fb, "callback_errors") == 0
     assert len(fb.torque_pub.sent) == 3
 
 
@@ -123,9 +117,9 @@ def test_a_failed_law_step_publishes_nothing_and_is_not_run_again(node_of):
     q_d = np.array([0.1, -0.2, 0.3])
     joint_state(fb, 0, q_d - 0.5)
     setpoint(fb, 0, q_d)
-    assert count(fb, "rejected.feedback_law") == 1 and not fb.torque_pub.sent
+    assert counter(fb, "rejected.feedback_law") == 1 and not fb.torque_pub.sent
     joint_state(fb, 0, q_d - 0.5)  # its resend: nothing to answer with, the law is not run
-    assert count(fb, "resent") == 1 and count(fb, "rejected.feedback_law") == 1
+    assert counter(fb, "resent") == 1 and counter(fb, "rejected.feedback_law") == 1
     assert not fb.torque_pub.sent
 
 
@@ -181,7 +175,7 @@ def test_run_time_settings_apply_at_the_next_sample_all_or_none(node_of):
     np.testing.assert_array_equal(torques(fb), [200.0 * (q_d - (q_d - e))])
     assert (fb.law.gains.kp, fb.law.gains.kv) == (200.0, 20.0)  # kv of the refused set: no
     assert isinstance(fb.law.gains.kp, float)
-    assert count(fb, "parameter_updates") == 1
+    assert counter(fb, "parameter_updates") == 1
 
 
 @pytest.mark.parametrize(
@@ -201,7 +195,7 @@ def test_pid_takes_its_parameter_family(node_of):
     q_d = np.array([0.1, -0.2, 0.3])
     joint_state(fb, 0, q_d - 0.01)
     setpoint(fb, 0, q_d)
-    assert len(fb.torque_pub.sent) == 1 and count(fb, "rejected") == 0
+    assert len(fb.torque_pub.sent) == 1 and counter(fb, "rejected") == 0
 
 
 def test_pid_gains_given_in_part_name_the_missing_one(node_of):
