@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from support.nodes import overrides
 
 import apc_msgs_py as wire
 from apc_feedback.node import FeedbackNode
@@ -99,8 +99,8 @@ def test_replay_into_fresh_feedback_gives_recorded_torques_exactly(recorded, gra
     n_states = sum(1 for _ in read_messages(path, JS))
     assert len(expected) == n_states > 100
 
-    overrides = [Parameter(k, value=v) for k, v in spec.node_parameters()["feedback_node"].items()]
-    feedback = graph.add(FeedbackNode(context=ctx, parameter_overrides=overrides))
+    params = overrides(spec.node_parameters()["feedback_node"])
+    feedback = graph.add(FeedbackNode(context=ctx, parameter_overrides=params))
     collector = graph.add(Collector(ctx, JointState, wire.FEEDBACK_TORQUE, wire.CONTROL_QOS))
     # The first torque must not be lost either: wait for feedback -> collector to match.
     graph.spin_until(lambda: feedback.torque_pub.get_subscription_count() >= 1, 30)
@@ -201,7 +201,7 @@ def test_clock_follows_bag_time(recorded, graph):
             Clock,
             wire.CLOCK,
             wire.CLOCK_QOS,
-            parameter_overrides=[Parameter("use_sim_time", value=True)],
+            parameter_overrides=overrides({"use_sim_time": True}),
         )
     )
     # Play once the follower's node listens (one context: both ends match together).

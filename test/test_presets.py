@@ -6,7 +6,7 @@ import dataclasses
 
 import pytest
 import rclpy
-from rclpy.parameter import Parameter
+from support.nodes import overrides
 
 from apc_core.params import ConfigError
 from apc_feedback.controller import AdaptiveConfig
@@ -23,18 +23,15 @@ from apc_lab.scenario import (
 pytestmark = pytest.mark.ros
 
 
-def _feedback(*files: str, **overrides) -> AdaptiveConfig:
+def _feedback(*files: str, **values) -> AdaptiveConfig:
     """The adaptive law's settings of a feedback node started from ``files`` (in apc's config
-    directory) and parameter ``overrides``."""
+    directory) and parameter overrides ``values``."""
     context = rclpy.Context()
     args = ["--ros-args"] + [a for f in files for a in ("--params-file", str(CONFIG_DIR / f))]
     rclpy.init(args=args, context=context)
     node = None
     try:
-        node = FeedbackNode(
-            context=context,
-            parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
-        )
+        node = FeedbackNode(context=context, parameter_overrides=overrides(values))
         return node.law.settings
     finally:
         if node is not None:
@@ -106,7 +103,7 @@ def test_robot_node_takes_the_same_presets(preset):
     rclpy.init(context=context)
     node = None
     try:
-        node = RobotNode(context=context, parameter_overrides=[Parameter("preset", value=preset)])
+        node = RobotNode(context=context, parameter_overrides=overrides({"preset": preset}))
         for key, value in PRESETS[preset]().items():
             assert node.get_parameter(f"adaptive.{key}").value == value, key
     finally:
