@@ -30,6 +30,7 @@ from support.fuzz import BATCH, Garbage, extreme_goal
 from support.graph import Graph
 from support.nodes import counter, errors, overrides
 from support.parameter_rig import ParameterRig, assert_refused
+from support.processes import NODE_MODULES
 from support.qos import DEEP_QOS
 from support.stand_ins import StandInPlant, stand_in_controllers, torque
 from trajectory_msgs.msg import JointTrajectory
@@ -506,11 +507,11 @@ def test_pd_gains_change_at_run_time_and_bad_values_are_refused(graph):
 # ----------------------------------------------------------------------------------------------
 # 3. Bad configuration: one line on stderr naming the parameter, exit code 2
 # ----------------------------------------------------------------------------------------------
-FF, FB, PLANT = "apc_feedforward.node", "apc_feedback.node", "apc_plant_sim.node"
+FF, FB, PLANT = "feedforward_node", "feedback_node", "plant_node"
 BROKEN_URDF = '<robot name="x"><link name="a"/><joint name="j" type="revolute"><parent link="a"/>'
 NO_JOINT_URDF = '<robot name="x"><link name="a"/></robot>'
 BAD_CONFIGS = [
-    # (id, module, arguments after --ros-args, parameter named, words of the reason)
+    # (id, node, arguments after --ros-args, parameter named, words of the reason)
     ("period_zero_ff", FF, ["-p", "period:=0.0"], "period", "out of range"),
     ("period_zero_plant", PLANT, ["-p", "period:=0.0"], "period", "out of range"),
     ("step_not_dividing", PLANT, ["-p", "step:=0.003"], "step", "divide"),
@@ -571,10 +572,10 @@ def bad_config_runs(tmp_path_factory):
     files["no_joint"].write_text(NO_JOINT_URDF)
 
     def run(case: tuple) -> tuple[int, str]:
-        _, module, args, _, _ = case
+        _, node, args, _, _ = case
         args = [a.format(**{k: str(v) for k, v in files.items()}) for a in args]
         proc = subprocess.run(
-            [sys.executable, "-m", module, "--ros-args", *args],
+            [sys.executable, "-m", NODE_MODULES[node], "--ros-args", *args],
             capture_output=True,
             text=True,
             timeout=60,
@@ -588,11 +589,10 @@ def bad_config_runs(tmp_path_factory):
 
 @pytest.mark.parametrize("case", BAD_CONFIGS, ids=[c[0] for c in BAD_CONFIGS])
 def test_bad_configuration_stops_the_node_with_one_line(bad_config_runs, case):
-    name, module, _, parameter, reason = case
+    name, node, _, parameter, reason = case
     code, stderr = bad_config_runs[name]
     assert code == 2, stderr
     lines = [line for line in stderr.splitlines() if line.strip()]
     assert len(lines) == 1, stderr
-    prog = module.split(".")[0].removeprefix("apc_").replace("plant_sim", "plant")
-    assert lines[0].startswith(f"{prog}_node: parameter '{parameter}': "), lines[0]
+    assert lines[0].startswith(f"{node}: parameter '{parameter}': "), lines[0]
     assert reason in lines[0], lines[0]

@@ -11,6 +11,7 @@ import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
 from support.nodes import overrides
+from support.processes import NODE_MODULES
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 import apc_msgs_py as wire
@@ -168,13 +169,8 @@ def scenario_samples(params):
     ],
 )
 def test_bad_parameter_stops_the_node_with_one_line(argv, parameter):
-    module = {
-        "feedback_node": "apc_feedback.node",
-        "feedforward_node": "apc_feedforward.node",
-        "plant_node": "apc_plant_sim.node",
-    }[argv[0]]
     proc = subprocess.run(
-        [sys.executable, "-m", module, "--ros-args", *argv[1:]],
+        [sys.executable, "-m", NODE_MODULES[argv[0]], "--ros-args", *argv[1:]],
         capture_output=True,
         text=True,
         timeout=30,
