@@ -28,7 +28,7 @@ from support.arm import NAMES, ROBOT, T_NS, N
 from support.capture import Capture, assert_all_finite, compare_with_offline
 from support.fuzz import BATCH, Garbage, extreme_goal
 from support.graph import Graph
-from support.nodes import counter, errors, overrides
+from support.nodes import counter, errors, overrides, recorded_diagnostics
 from support.parameter_rig import ParameterRig, assert_refused
 from support.processes import NODE_MODULES
 from support.qos import DEEP_QOS
@@ -436,7 +436,6 @@ def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     """PD with absurd gains in a lockstep run: every applied torque in the recording is within
     the URDF's effort limits, and saturation is on the recorded /diagnostics."""
     from apc_lab.experiment import run_in_process
-    from apc_recording.bag import read_messages
     from apc_recording.runs import load_run
 
     spec = RunSpec(
@@ -451,11 +450,7 @@ def test_torque_limits_hold_in_a_recorded_run(tmp_path):
     assert np.all(np.abs(effort) <= limit)
     saturated_rows = np.any(np.abs(effort) == limit, axis=1)
     assert saturated_rows.sum() > 10
-    plant_status = None
-    for message in read_messages(outcome.path, topics=["/diagnostics"]):
-        for status in message.decode().status:
-            if status.name.endswith("plant_node"):
-                plant_status = {kv.key: kv.value for kv in status.values}
+    plant_status = recorded_diagnostics(outcome.path).get("plant_node")
     assert plant_status is not None, "the plant's final /diagnostics was not recorded"
     assert int(plant_status["saturated_samples"]) == saturated_rows.sum()
     assert any(int(plant_status.get(f"saturated.{name}", 0)) > 0 for name in NAMES)

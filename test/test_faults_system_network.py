@@ -18,13 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.netns import Link
+from support.nodes import recorded_diagnostics
 from support.processes import Children, write_params
 from support.report import report
 
 import apc_msgs_py as wire
 from apc_lab.experiment import RunSpec
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
-from apc_recording.bag import read_messages
 
 #: FastDDS writer/reader timings for a lossy link. A lost sample of a reliable topic holds back
 #: every later one until it is repaired (in-order delivery); with FastDDS's defaults (heartbeat
@@ -111,11 +111,7 @@ def _run_across_link(link: Link, tmp_path: Path, name: str, mode: str) -> tuple[
 
 def _plant_counters(bag: Path) -> dict[str, str]:
     """The plant's last diagnostics counters in a recording (late, braked, watchdog ...)."""
-    last: dict[str, str] = {}
-    for m in read_messages(bag, topics=["/diagnostics"]):
-        for status in m.decode().status:
-            if status.name.endswith("plant_node"):
-                last = {kv.key: kv.value for kv in status.values}
+    last = recorded_diagnostics(bag).get("plant_node", {})
     keys = ("late_samples", "braked_samples", "watchdog_trips", "feedback_missing_samples")
     return {k: last[k] for k in keys if k in last}
 

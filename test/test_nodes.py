@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from support.nodes import overrides
+from support.nodes import overrides, recorded_diagnostics
 from support.processes import NODE_MODULES
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -21,7 +21,6 @@ from apc_feedforward.trajectory import Waypoints
 from apc_lab.experiment import RunSpec, run_in_processes
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_plant_sim.node import PlantNode
-from apc_recording.bag import read_messages
 from apc_recording.runs import load_run
 
 pytestmark = pytest.mark.ros
@@ -198,13 +197,10 @@ def test_realtime_three_processes_tracks_within_twice_the_lockstep_error(tmp_pat
     max_rt = np.nanmax(np.abs(recorded.error[: end + 1]), axis=0)
     max_ls = np.abs(lockstep.error[: end + 1]).max(axis=0)
     assert np.all(max_rt <= 2.0 * max_ls), (np.rad2deg(max_rt), np.rad2deg(max_ls))
-    statuses = {}
-    for message in read_messages(outcome.path, topics=["/diagnostics"]):
-        for status in message.decode().status:
-            statuses[status.name] = {kv.key: kv.value for kv in status.values}
-    names = {name.rsplit("/", 1)[-1] for name in statuses}
+    statuses = recorded_diagnostics(outcome.path)
+    names = set(statuses)
     assert {"plant_node", "feedforward_node", "feedback_node", "recorder"} - names <= {"recorder"}
-    plant = next(v for k, v in statuses.items() if k.endswith("plant_node"))
+    plant = statuses["plant_node"]
     assert "period_median_us" in plant and "integrate_median_us" in plant
-    feedback = next(v for k, v in statuses.items() if k.endswith("feedback_node"))
+    feedback = statuses["feedback_node"]
     assert "compute_median_us" in feedback and "trace_p" in feedback

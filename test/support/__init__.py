@@ -2,8 +2,8 @@
 
 - :mod:`.graph`: a ROS graph per test (the ``graph`` fixture); :mod:`.qos`: the test's own
   readers and writers, deep enough never to drop; :mod:`.nodes`: apc's nodes run in the test
-  process (parameter overrides in, diagnostics counters out); :mod:`.arm`: the arm and period
-  the node tests run.
+  process (parameter overrides in, diagnostics counters out, also from a recording);
+  :mod:`.arm`: the arm and period the node tests run.
 - :mod:`.capture`: the nodes' own output by topic and stamp, and its checks (finite, equal to
   the offline loop); :mod:`.stand_ins`: a plant or controllers played by the test;
   :mod:`.parameter_rig`: the feedback node driven through its parameter service;
