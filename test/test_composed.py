@@ -19,7 +19,7 @@ import pytest
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from support.processes import write_params
+from support.processes import node_process, write_params
 
 import apc_msgs_py as wire
 from apc_lab.experiment import RunSpec
@@ -81,20 +81,11 @@ def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
     spec = RunSpec(scenario, "adaptive", settings, "lockstep")
     # ff, fb, the observer and its gate (_observe)
     params = _params_file(tmp_path, spec, wait_for_subscribers=4)
-    with open(tmp_path / "arm.log", "wb") as log:
-        arm = subprocess.Popen(
-            [str(BIN / "composed"), "--ros-args", "--params-file", str(params)],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
-    try:
+    argv = [str(BIN / "composed"), "--ros-args", "--params-file", str(params)]
+    with node_process(argv, tmp_path / "arm.log", with_stdout=True) as arm:
         states = _observe(graph, [arm])
         assert arm.returncode == 0, (tmp_path / "arm.log").read_text()[-2000:]
         _check_against_offline(states, scenario, settings)
-    finally:
-        if arm.poll() is None:
-            arm.kill()
-            arm.wait()
 
 
 def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
@@ -103,35 +94,24 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
     spec = RunSpec(scenario, "adaptive", settings, "lockstep")
     params = _params_file(tmp_path, spec, wait_for_subscribers=4)  # as in the lockstep test
     cmd = ["--ros-args", "--params-file", str(params)]
-    procs: list[subprocess.Popen] = []
-    try:
-        with open(tmp_path / "controllers.log", "wb") as log:
-            procs.append(
-                subprocess.Popen(
-                    [str(BIN / "composed"), "--controllers", *cmd],
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                )
-            )
-        with open(tmp_path / "plant.log", "wb") as log:
-            procs.append(subprocess.Popen([str(BIN / "plant_node"), *cmd], stdout=log, stderr=log))
-        states = _observe(graph, procs)
-        assert procs[1].returncode == 0, (tmp_path / "plant.log").read_text()[-2000:]
-        assert procs[0].poll() is None  # the controllers run until stopped
+    with (
+        node_process(
+            [str(BIN / "composed"), "--controllers", *cmd],
+            tmp_path / "controllers.log",
+            with_stdout=True,
+        ) as controllers,
+        node_process(
+            [str(BIN / "plant_node"), *cmd], tmp_path / "plant.log", with_stdout=True
+        ) as plant,
+    ):
+        states = _observe(graph, [controllers, plant])
+        assert plant.returncode == 0, (tmp_path / "plant.log").read_text()[-2000:]
+        assert controllers.poll() is None  # the controllers run until stopped
         _check_against_offline(states, scenario, settings)
         log_text = (tmp_path / "controllers.log").read_text()
         assert "feedforward_node" in log_text and "feedback_node" in log_text
         assert "plant_node" not in log_text
-    finally:
-        for proc in procs:
-            if proc.poll() is None:
-                proc.send_signal(2)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
-    assert procs[0].returncode == 0
+    assert controllers.returncode == 0  # stopped by SIGINT (support.processes.node_process)
 
 
 def test_help_lists_each_node_and_bad_arguments_exit_2() -> None:
