@@ -140,6 +140,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self.model = model
         limit = np.asarray(model.effortLimit, dtype=float)
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
+        self._effort_floor = -self._effort_limit
         self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
         self._input_delay = config.input_delay
         self._set_weights(config)
@@ -285,7 +286,7 @@ class AdaptiveFeedback(FeedbackLaw):
     def identified_input_gain(self) -> np.ndarray:
         """The identified effect of a perturbation held over one period (with lags, the sum
         of ``Ĝ₀ … Ĝ_L``), shape (2n, n): what :attr:`prior_input_gain` started it from."""
-        return _summed_inputs(self.rls.G, self.n_joints)
+        return self._input_gain()
 
     def expect_input_delay(self, seconds: float) -> None:
         """Split ``Ĝ(0)`` by this delay (s) at the next (re)start instead of
@@ -306,9 +307,17 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         n = self.n_joints
         if self.config.input_lags:
-            return bool((self.identified_input_gain[n:].diagonal() > 0.0).all())
-        # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
-        return bool((self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal() > 0.0).all())
+            diagonal = self._input_gain(velocity_rows=True).diagonal()
+        else:  # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
+            diagonal = self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal()
+        return bool(_all(diagonal > 0.0))
+
+    def _input_gain(self, velocity_rows: bool = False) -> np.ndarray:
+        """:attr:`identified_input_gain` (a fresh array) from the identifier's Θᵀ without a
+        copy of it; with ``velocity_rows`` only its velocity block (rows n..2n)."""
+        n = self.n_joints
+        rows = slice(n, 2 * n) if velocity_rows else slice(0, 2 * n)
+        return _summed_inputs(self.rls.model_view()[rows, 2 * n : -1], n)
 
     def _control(self, dx: np.ndarray) -> np.ndarray:
         """Optimal control of the identified model (Eq. 35, or its extensions: a receding
@@ -394,9 +403,12 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         inputs = self._inputs
         if len(inputs) > 1:
-            inputs[1:] = inputs[:-1].copy()
-            limit = self._effort_limit
-            inputs[0] = np.clip(self._u_n_prev + self._du_prev, -limit, limit) - self._u_n_prev
+            inputs[1:] = inputs[:-1]  # numpy copies an overlapping source first
+            # Within the effort limits (np.clip's own wrapper costs more than its two ufuncs).
+            command = np.add(self._u_n_prev, self._du_prev, out=inputs[0])
+            np.maximum(command, self._effort_floor, out=command)
+            np.minimum(command, self._effort_limit, out=command)
+            np.subtract(command, self._u_n_prev, out=command)
         elif applied is not None and self._identify_applied:
             np.subtract(applied, self._u_n_prev, out=inputs[0])
         else:
@@ -431,6 +443,10 @@ def _receding_controller(
 
 
 def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
-    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (2n, (L+1) n): the effect of an input held
-    over every lag's period."""
-    return G.reshape(G.shape[0], -1, n).sum(axis=1)
+    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (rows, (L+1) n): the effect of an input held
+    over every lag's period (a fresh array)."""
+    return np.add.reduce(G.reshape(G.shape[0], -1, n), axis=1)
+
+
+# The ufunc reductions, without ndarray.all's Python wrapper.
+_all = np.logical_and.reduce
