@@ -146,8 +146,11 @@ class VelocityEstimator:
             return (position - q2) / ((stamp_ns - t2) * 1e-9)
         # The parabola through the base, the state nearest the middle and the newest one,
         # differentiated at the newest: no lag for a constant acceleration.
-        middle = (t2 + stamp_ns) / 2
-        t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
+        if len(history) == 3:  # the last three states (a window of 0, or the states spread)
+            t1, q1 = history[1]
+        else:
+            middle = (t2 + stamp_ns) / 2
+            t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
         a, b = (stamp_ns - t1) * 1e-9, (stamp_ns - t2) * 1e-9
         self.acceleration = 2.0 * (position / (a * b) - q1 / (a * (b - a)) + q2 / (b * (b - a)))
         return position * (a + b) / (a * b) - q1 * b / (a * (b - a)) + q2 * a / (b * (b - a))
