@@ -25,7 +25,7 @@ from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
     OneStepControl,
-    receding_horizon_control,
+    RecedingHorizonControl,
     validate_weights,
 )
 from apc_feedback.rls import Rls, RlsError
@@ -140,6 +140,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self.model = model
         limit = np.asarray(model.effortLimit, dtype=float)
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
+        self._effort_floor = -self._effort_limit
         self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
         self._input_delay = config.input_delay
         self._set_weights(config)
@@ -153,7 +154,7 @@ class AdaptiveFeedback(FeedbackLaw):
         validate_weights(Q, R, 2 * n, n)
         self.config, self.Q, self.R = config, Q, R
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
-        self._Q_aug = np.diag(np.concatenate([q_diagonal, np.full(n, config.q_integral)]))
+        self._receding = _receding_controller(config, q_diagonal, R, n)
         self._identify_applied = config.identify_with == "applied"
 
     @property
@@ -268,7 +269,7 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.rejected_updates += 1
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
-        du = self._control(dx) if self.config.input_lags == 0 else self._control_lagged(dx)
+        du = self._control(dx)
         self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
@@ -285,7 +286,7 @@ class AdaptiveFeedback(FeedbackLaw):
     def identified_input_gain(self) -> np.ndarray:
         """The identified effect of a perturbation held over one period (with lags, the sum
         of ``Ĝ₀ … Ĝ_L``), shape (2n, n): what :attr:`prior_input_gain` started it from."""
-        return _summed_inputs(self.rls.G, self.n_joints)
+        return self._input_gain()
 
     def expect_input_delay(self, seconds: float) -> None:
         """Split ``Ĝ(0)`` by this delay (s) at the next (re)start instead of
@@ -306,43 +307,67 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         n = self.n_joints
         if self.config.input_lags:
-            return bool((self.identified_input_gain[n:].diagonal() > 0.0).all())
-        # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
-        return bool((self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal() > 0.0).all())
+            diagonal = self._input_gain(velocity_rows=True).diagonal()
+        else:  # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
+            diagonal = self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal()
+        return bool(_all(diagonal > 0.0))
+
+    def _input_gain(self, velocity_rows: bool = False) -> np.ndarray:
+        """:attr:`identified_input_gain` (a fresh array) from the identifier's Θᵀ without a
+        copy of it; with ``velocity_rows`` only its velocity block (rows n..2n)."""
+        n = self.n_joints
+        rows = slice(n, 2 * n) if velocity_rows else slice(0, 2 * n)
+        return _summed_inputs(self.rls.model_view()[rows, 2 * n : -1], n)
 
     def _control(self, dx: np.ndarray) -> np.ndarray:
-        """Optimal control of the identified model (Eq. 35, or its extensions)."""
-        config = self.config
-        if config.q_integral == 0.0 and config.horizon == 1:
+        """Optimal control of the identified model (Eq. 35, or its extensions: a receding
+        horizon, integral action, lagged inputs)."""
+        if self._receding is None:
             return self._one_step(self.rls.model_view(), dx)
-        F, G, w = self.rls.F, self.rls.G, self.rls.w
-        if config.q_integral == 0.0:
-            return receding_horizon_control(
-                F, G, w, self.Q, self.R, dx, config.horizon, check_weights=False
-            )
-        Fa, Ga, wa, xa = self._with_integral(F, G, w, dx, dx)
-        return receding_horizon_control(
-            Fa, Ga, wa, self._Q_aug, self.R, xa, config.horizon, check_weights=False
-        )
+        return self._receding_control(dx)
 
-    def _with_integral(
-        self, F: np.ndarray, G: np.ndarray, w: np.ndarray, x: np.ndarray, dx: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The model ``(F, G, w)`` over the state ``x`` (δx first) augmented with the
-        integrated position error, after this sample's integration step (anti-windup bound
-        ``integral_limit``): ``ξ(k+1) = ξ(k) + T δq(k+1)``, with ``δq(k+1)`` from the model's
-        position rows."""
-        n, T, limit = self.n_joints, self.config.period, self.config.integral_limit
-        self.integral = np.clip(self.integral + T * dx[:n], -limit, limit)
-        s = F.shape[0]
-        Fa = np.zeros((s + n, s + n))
-        Fa[:s, :s] = F
-        Fa[s:, :s] = T * F[:n]
-        Fa[s:, s:] = np.eye(n)
-        Ga = np.vstack([G, T * G[:n]])
-        wa = np.concatenate([w, T * w[:n]])
-        xa = np.concatenate([x, self.integral])
-        return Fa, Ga, wa, xa
+    def _receding_control(self, dx: np.ndarray) -> np.ndarray:
+        """The receding-horizon control over ``(δx(k), δu(k-1), …, δu(k-L), ξ(k+1))``.
+
+        With ``L`` input lags ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w`` with the decision
+        ``v = δu(k)``; the inputs shift one lag per step. The horizon counts ``horizon`` steps
+        after the longest lag, so the decision is weighed where it has acted. With integral
+        action the model is augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C selects
+        the position rows). The identified blocks are written into the controller's model
+        every sample; its constant entries (the lags' shift, the integral's identity) were
+        written once by :func:`_receding_controller`.
+        """
+        config, n = self.config, self.n_joints
+        p, lags = 2 * n, config.input_lags
+        s = p + lags * n  # the state without the integral
+        model = self.rls.model_view()  # Θᵀ = [F G₀ … G_L w]
+        control = self._receding
+        assert control is not None
+        F, G, w, x = control.F, control.G, control.w, control.x
+        F[:p, :p] = model[:, :p]
+        G[:p] = model[:, p : p + n]
+        w[:p] = model[:, -1]
+        x[:p] = dx
+        if lags:
+            F[:p, p:s] = model[:, p + n : p + n + lags * n]
+            # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
+            x[p:s] = self._z_du[: lags * n]
+        if config.q_integral > 0.0:
+            T = config.period
+            np.multiply(F[:n, :s], T, out=F[s:, :s])
+            np.multiply(G[:n], T, out=G[s:])
+            np.multiply(w[:n], T, out=w[s:])
+            x[s:] = self._integrate(dx)
+        return control.solve()
+
+    def _integrate(self, dx: np.ndarray) -> np.ndarray:
+        """This sample's integration step of the position error, ``ξ ← ξ + T δq`` within the
+        anti-windup bound ``integral_limit``; the new ``ξ``."""
+        T, limit = self.config.period, self.config.integral_limit
+        # np.clip's own wrapper costs more than the two ufuncs it is (the same bits).
+        step = self.integral + T * dx[: self.n_joints]
+        self.integral = np.minimum(np.maximum(step, -limit), limit)
+        return self.integral
 
     def _stuck(self, qd: np.ndarray) -> bool:
         """A joint's measured speed is below ``identify_min_speed`` at ``k-1`` or ``k``."""
@@ -378,9 +403,12 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         inputs = self._inputs
         if len(inputs) > 1:
-            inputs[1:] = inputs[:-1].copy()
-            limit = self._effort_limit
-            inputs[0] = np.clip(self._u_n_prev + self._du_prev, -limit, limit) - self._u_n_prev
+            inputs[1:] = inputs[:-1]  # numpy copies an overlapping source first
+            # Within the effort limits (np.clip's own wrapper costs more than its two ufuncs).
+            command = np.add(self._u_n_prev, self._du_prev, out=inputs[0])
+            np.maximum(command, self._effort_floor, out=command)
+            np.minimum(command, self._effort_limit, out=command)
+            np.subtract(command, self._u_n_prev, out=command)
         elif applied is not None and self._identify_applied:
             np.subtract(applied, self._u_n_prev, out=inputs[0])
         else:
@@ -388,39 +416,37 @@ class AdaptiveFeedback(FeedbackLaw):
         self._inputs_known = min(self._inputs_known + 1, len(inputs))
         return self._inputs_known == len(inputs)
 
-    def _control_lagged(self, dx: np.ndarray) -> np.ndarray:
-        """Optimal control over ``(δx(k), δu(k-1), …, δu(k-L))`` with the lagged model.
 
-        ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w`` with the decision ``v = δu(k)``; the
-        inputs shift one lag per step. The horizon counts ``horizon`` steps after the longest
-        lag, so the decision is weighed where it has acted. The integral state of
-        :meth:`_control` is added on the position rows.
-        """
-        config, n = self.config, self.n_joints
-        lags = config.input_lags
-        p, s = 2 * n, 2 * n + lags * n
-        G_all = self.rls.G
-        F = np.zeros((s, s))
-        F[:p, :p] = self.rls.F
-        F[:p, p:] = G_all[:, n:]
-        F[p + n :, p : s - n] = np.eye((lags - 1) * n)  # δu(k-j) -> δu(k-j-1)
-        G = np.zeros((s, n))
-        G[:p] = G_all[:, :n]
-        G[p : p + n] = np.eye(n)
-        w = np.zeros(s)
-        w[:p] = self.rls.w
-        # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
-        x = np.concatenate([dx, self._inputs[:lags].ravel()])
-        q_diagonal = np.concatenate([self.Q.diagonal(), np.zeros(lags * n)])
-        if config.q_integral > 0.0:
-            F, G, w, x = self._with_integral(F, G, w, x, dx)
-            q_diagonal = np.concatenate([q_diagonal, np.full(n, config.q_integral)])
-        return receding_horizon_control(
-            F, G, w, np.diag(q_diagonal), self.R, x, config.horizon + lags, check_weights=False
-        )
+def _receding_controller(
+    config: AdaptiveConfig, q_diagonal: np.ndarray, R: np.ndarray, n: int
+) -> RecedingHorizonControl | None:
+    """The receding-horizon controller of ``config``'s model (None: the one-step law of Eq. 35
+    does), with the model's constant entries written: the shift of the lagged inputs, the
+    decision entering as ``δu(k-1)`` one step on, the integral's identity. See
+    :meth:`AdaptiveFeedback._receding_control` for the state and the blocks written per sample.
+    """
+    lags, integral = config.input_lags, config.q_integral > 0.0
+    if lags == 0 and not integral and config.horizon == 1:
+        return None
+    p = 2 * n
+    s = p + lags * n
+    weights = [q_diagonal, np.zeros(lags * n)]
+    if integral:
+        weights.append(np.full(n, config.q_integral))
+    control = RecedingHorizonControl(np.concatenate(weights), R, config.horizon + lags)
+    if lags:
+        control.G[p : p + n] = np.eye(n)  # v = δu(k) is δu(k-1) one step on
+        control.F[p + n : s, p : s - n] = np.eye((lags - 1) * n)  # δu(k-j) -> δu(k-j-1)
+    if integral:
+        control.F[s:, s:] = np.eye(n)  # ξ(k+1) = ξ(k) + …
+    return control
 
 
 def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
-    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (2n, (L+1) n): the effect of an input held
-    over every lag's period."""
-    return G.reshape(G.shape[0], -1, n).sum(axis=1)
+    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (rows, (L+1) n): the effect of an input held
+    over every lag's period (a fresh array)."""
+    return np.add.reduce(G.reshape(G.shape[0], -1, n), axis=1)
+
+
+# The ufunc reductions, without ndarray.all's Python wrapper.
+_all = np.logical_and.reduce

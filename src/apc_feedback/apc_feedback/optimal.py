@@ -21,7 +21,9 @@ printed form stays selectable to reproduce the paper as written.
 reference; :class:`OneStepControl` computes the same ``u*`` every sample for a diagonal ``Q``
 from preallocated buffers, and the tests hold the two equal. The linear system is solved
 (LAPACK's Cholesky solver ``dposv``: ``R + Gᵀ Q G`` is symmetric positive definite), never
-inverted. No ROS here.
+inverted. :func:`receding_horizon_control` looks ``N`` steps ahead instead of one;
+:class:`RecedingHorizonControl` is its per-sample form, held equal to it by the tests in the same
+way. No ROS here.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from apc_feedback.arrays import finite_array
 __all__ = [
     "ControlError",
     "OneStepControl",
+    "RecedingHorizonControl",
     "one_step_control",
     "one_step_cost",
     "receding_horizon_control",
@@ -363,3 +366,121 @@ def receding_horizon_control(
     PB = P @ B
     s = np.append(x, 1.0)
     return -_solve_spd(R + B.T @ PB, PB.T @ (A @ s))
+
+
+class RecedingHorizonControl:
+    """:func:`receding_horizon_control` for the per-sample loop: diagonal ``Q``, fixed horizon,
+    every array made once.
+
+    The augmented model ``A = [[F, w], [0, 1]]``, ``B = [[G], [0]]`` and ``Q̃ = diag(Q, 0)`` live
+    in buffers whose constant entries are written here, once; the caller writes the model into
+    the views :attr:`F`, :attr:`G`, :attr:`w` and the state into :attr:`x` (or passes them to
+    :meth:`__call__`) and calls :meth:`solve`. A caller whose model has constant blocks of its
+    own (the adaptive law's lagged inputs and integral) writes those once too and only the
+    identified blocks every sample. The Riccati recursion runs into preallocated products and
+    solves by Cholesky (``dposv``), operation by operation as :func:`receding_horizon_control`
+    does: the two give the same bits (the tests check it). The products are ``numpy.dot``'s,
+    the same BLAS calls as the function's ``@`` at less overhead per call. Inputs are not
+    checked per call (the model and state must be finite: the identifier's and the law's are).
+
+    Parameters
+    ----------
+    q_diagonal : array_like, shape (p,)
+        Diagonal of ``Q``, finite and >= 0.
+    R : array_like, shape (n, n)
+        Symmetric positive definite.
+    horizon : int
+        N >= 1 steps.
+
+    Raises
+    ------
+    ControlError
+        On construction, for bad weights or horizon (the message names it).
+    """
+
+    def __init__(self, q_diagonal: Any, R: Any, horizon: int) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise ControlError(f"horizon must be an integer >= 1, got {horizon!r}")
+        q = np.array(q_diagonal, dtype=float)
+        if q.ndim != 1 or q.shape[0] < 1:
+            raise ControlError(f"q_diagonal must have shape (p,), got {q.shape}")
+        p = q.shape[0]
+        R = np.asarray(R, dtype=float)
+        n = R.shape[0] if R.ndim == 2 else 0
+        Q, self.R = validate_weights(np.diag(q), R, p, n)
+        self.p, self.n, self.horizon = p, n, int(horizon)
+        # The augmented model and weight, their constant entries written once.
+        self._A = np.zeros((p + 1, p + 1))
+        self._A[p, p] = 1.0
+        self._B = np.zeros((p + 1, n))
+        self._Qt = np.zeros((p + 1, p + 1))
+        self._Qt[:p, :p] = Q
+        self._s = np.zeros(p + 1)  # s = (x, 1)
+        self._s[p] = 1.0
+        #: Views the caller writes the model ``F`` (p, p), ``G`` (p, n), ``w`` (p,) into.
+        self.F, self.G, self.w = self._A[:p, :p], self._B[:p], self._A[:p, p]
+        #: View the caller writes the state ``x`` (p,) into.
+        self.x = self._s[:p]
+        # The recursion's products.
+        self._P = np.empty((p + 1, p + 1))
+        self._PA = np.empty((p + 1, p + 1))
+        self._next = np.empty((p + 1, p + 1))
+        self._PB = np.empty((p + 1, n))
+        self._PBK = np.empty((p + 1, p + 1))
+        self._S = np.empty((n, n))
+        self._BtPA = np.empty((n, p + 1))
+        self._As = np.empty(p + 1)
+        self._b = np.empty(n)
+        self._finite_gain = np.empty((n, p + 1), dtype=bool)
+        self._finite_u = np.empty(n, dtype=bool)
+
+    def __call__(self, F: np.ndarray, G: np.ndarray, w: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``u(k)`` for the model ``(F, G, w)`` and the state ``x`` (all finite): written into
+        the views, then :meth:`solve`."""
+        self.F[...] = F
+        self.G[...] = G
+        self.w[...] = w
+        self.x[...] = x
+        return self.solve()
+
+    def solve(self) -> np.ndarray:
+        """``u(k)`` (a fresh array, shape (n,)) for the model and state in the views.
+
+        Raises
+        ------
+        ControlError
+            If ``R + Bᵀ P B`` is not numerically positive definite or a gain is not finite.
+        """
+        A, B, R, Qt = self._A, self._B, self.R, self._Qt
+        P, PB, S, BtPA = Qt, self._PB, self._S, self._BtPA
+        for _ in range(self.horizon - 1):
+            np.dot(P, B, out=PB)
+            np.dot(B.T, PB, out=S)
+            S += R  # R + Bᵀ P B
+            np.dot(PB.T, A, out=BtPA)
+            K = self._solve(S, BtPA, self._finite_gain)  # (R + Bᵀ P B)⁻¹ Bᵀ P A
+            np.dot(P, A, out=self._PA)
+            np.dot(PB, K, out=self._PBK)
+            np.subtract(self._PA, self._PBK, out=self._PA)  # P A - P B K
+            np.dot(A.T, self._PA, out=self._next)
+            self._next += Qt  # Q̃ + Aᵀ P A - Aᵀ P B K
+            P = self._P
+            np.add(self._next, self._next.T, out=P)
+            P *= 0.5  # symmetrised
+        np.dot(P, B, out=PB)
+        np.dot(B.T, PB, out=S)
+        S += R
+        np.dot(A, self._s, out=self._As)
+        np.dot(PB.T, self._As, out=self._b)  # Bᵀ P₁ A s
+        u = self._solve(S, self._b, self._finite_u)
+        return np.negative(u, out=u)
+
+    @staticmethod
+    def _solve(S: np.ndarray, rhs: np.ndarray, finite: np.ndarray) -> np.ndarray:
+        """:func:`_solve_spd` with the finiteness check into ``finite`` (no temporary)."""
+        _, X, info = lapack.dposv(S, rhs)
+        if info != 0:
+            raise ControlError("R + Gᵀ Q G is not positive definite (check R)")
+        if not np.logical_and.reduce(np.isfinite(X, out=finite), axis=None):
+            raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
+        return X

@@ -147,10 +147,11 @@ class Rls:
         self._can_undo = False
         self._theta0 = np.zeros((m, p))
         self._P0 = np.diag(config.initial_p_diagonal(self._n, input_lags))
-        # Block guard (alpha_model): the bound of each block's trace, each row's block, and a
-        # buffer for the congruence's scale (see the module docstring).
-        self._block_max = config.block_trace_max(self._n, input_lags)
-        self._block_of_row = np.repeat([0, 1, 2], [p, self._q, 1])
+        # Block guard (alpha_model): the bound of each block's trace (δx, inputs, constant), and
+        # buffers for the congruence's scale per row and per entry (see the module docstring).
+        block_max = config.block_trace_max(self._n, input_lags)
+        self._block_bounds = None if block_max is None else block_max.tolist()
+        self._row_scale = np.empty(m)
         self._block_scale = np.empty((m, m))
         self._restore()
 
@@ -383,15 +384,15 @@ class Rls:
         np.multiply.outer(r, pz, out=stacked)  # [P z zᵀ P; -e (P z)ᵀ]
         stacked *= -gamma  # [-γ P z zᵀ P; γ e (P z)ᵀ], the increments of Eqs. 30 and 29
         stacked += now.stacked  # [P - γ P z zᵀ P (Eq. 30); Θᵀ + γ e (P z)ᵀ (Eq. 29, every i)]
-        trace_p = float(_sum(new.diagonal))  # trace(P - γ P z zᵀ P)
         scale = 1.0 / rho if self._exponential else 1.0  # the 1/ρ of Eq. 30 corrected
         clipped = False
         trace_max = self._config.trace_max
-        if self._block_max is not None:
+        if self._block_bounds is not None:
             if scale != 1.0:
                 new.P *= scale  # Eq. 30's 1/ρ
             trace_p, clipped = self._guard_blocks(new)
         else:
+            trace_p = float(_sum(new.diagonal))  # trace(P - γ P z zᵀ P)
             if trace_max is not None and trace_p * scale > trace_max:
                 scale = trace_max / trace_p  # wind-up guard: trace(P(k+1)) = trace_max
                 clipped = True
@@ -409,16 +410,26 @@ class Rls:
     def _guard_blocks(self, views: _BufferViews) -> tuple[float, bool]:
         """The guard with a model prior: ``P ← S P S``, ``S`` = ``sqrt(bound / trace)`` on each
         block over its bound, 1 elsewhere; returns trace(P) and whether it acted."""
-        p = self._p
-        diagonal = views.diagonal
-        traces = np.array([_sum(diagonal[:p]), _sum(diagonal[p:-1]), diagonal[-1]])
-        over = traces > self._block_max
-        if not over.any():
-            return float(_sum(traces)), False
-        s = np.sqrt(np.where(over, self._block_max / traces, 1.0))[self._block_of_row]
+        # Three traces and bounds as Python floats: a sample costs less than with arrays.
+        traces = (
+            float(_sum(views.diagonal_x)),
+            float(_sum(views.diagonal_u)),
+            float(views.diagonal[-1]),
+        )
+        bounds = self._block_bounds
+        assert bounds is not None
+        over = [trace > bound for trace, bound in zip(traces, bounds, strict=True)]
+        if not any(over):
+            return traces[0] + traces[1] + traces[2], False
+        scales = [
+            math.sqrt(bound / trace) if past else 1.0
+            for trace, bound, past in zip(traces, bounds, over, strict=True)
+        ]
+        s, p = self._row_scale, self._p
+        s[:p], s[p:-1], s[-1] = scales
         np.multiply.outer(s, s, out=self._block_scale)  # exactly symmetric, as P is
         views.P *= self._block_scale
-        return float(_sum(diagonal)), True
+        return float(_sum(views.diagonal)), True
 
     # ------------------------------------------------------------------ helpers
     def predict(self, z: np.ndarray) -> np.ndarray:
@@ -492,6 +503,9 @@ class _BufferViews:
         self.P = stacked[:m]
         self.theta_t = stacked[m:]
         self.diagonal = self.P.diagonal()
+        p = stacked.shape[0] - m
+        self.diagonal_x = self.diagonal[:p]  # the δx block's (the model prior's guard)
+        self.diagonal_u = self.diagonal[p:-1]  # the inputs' block's
         self.theta_t_readonly = stacked[m:].view()
         self.theta_t_readonly.flags.writeable = False
 

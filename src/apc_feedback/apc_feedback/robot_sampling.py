@@ -126,19 +126,40 @@ class VelocityEstimator:
         self.window_ns = int(window_ns)
         self._history: deque[tuple[int, np.ndarray]] = deque()
         self.acceleration: np.ndarray | None = None
+        self._estimated = True  # the newest state's acceleration is known
 
     def reset(self) -> None:
         self._history.clear()
         self.acceleration = None
+        self._estimated = True
 
     def update(self, stamp_ns: int, position: np.ndarray) -> np.ndarray | None:
         """Add a state (stamps strictly increasing); its velocity, None for the first."""
-        self.acceleration = None
+        self.add(stamp_ns, position)
+        return self._estimate()
+
+    def add(self, stamp_ns: int, position: np.ndarray) -> None:
+        """Add a state (stamps strictly increasing) without estimating at it: for a driver
+        that sends its velocity, whose states need the estimate's acceleration only when one
+        is carried to its sample's time (:meth:`newest_acceleration`)."""
         history = self._history
         history.append((stamp_ns, position))
         # Keep one state at least a window old (the base) and everything after it.
         while len(history) > 3 and stamp_ns - history[1][0] >= self.window_ns:
             history.popleft()
+        self.acceleration, self._estimated = None, False
+
+    def newest_acceleration(self) -> np.ndarray | None:
+        """The parabola's acceleration at the newest state (None before three states)."""
+        if not self._estimated:
+            self._estimate()
+        return self.acceleration
+
+    def _estimate(self) -> np.ndarray | None:
+        """The velocity at the newest state (None for the first); sets :attr:`acceleration`."""
+        self._estimated = True
+        history = self._history
+        stamp_ns, position = history[-1]
         t2, q2 = history[0]
         if t2 == stamp_ns:
             return None
@@ -146,11 +167,31 @@ class VelocityEstimator:
             return (position - q2) / ((stamp_ns - t2) * 1e-9)
         # The parabola through the base, the state nearest the middle and the newest one,
         # differentiated at the newest: no lag for a constant acceleration.
-        middle = (t2 + stamp_ns) / 2
-        t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
+        if len(history) == 3:  # the last three states (a window of 0, or the states spread)
+            t1, q1 = history[1]
+        else:
+            middle = (t2 + stamp_ns) / 2
+            t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
         a, b = (stamp_ns - t1) * 1e-9, (stamp_ns - t2) * 1e-9
-        self.acceleration = 2.0 * (position / (a * b) - q1 / (a * (b - a)) + q2 / (b * (b - a)))
-        return position * (a + b) / (a * b) - q1 * b / (a * (b - a)) + q2 * a / (b * (b - a))
+        velocity, self.acceleration = _parabola(position, q1, q2, a, b)
+        return velocity
+
+
+def _parabola(
+    q0: np.ndarray, q1: np.ndarray, q2: np.ndarray, a: float, b: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration at ``q0`` of the parabola through ``q0`` (now), ``q1`` (``a``
+    s before) and ``q2`` (``b`` s before), per joint.
+
+    Plain Python per entry: for a joint state's few entries it is quicker than numpy's fourteen
+    array operations, with the same arithmetic in the same order (the same bits).
+    """
+    ab, a_ba, b_ba, a_b = a * b, a * (b - a), b * (b - a), a + b
+    velocity, acceleration = [], []
+    for x0, x1, x2 in zip(q0.tolist(), q1.tolist(), q2.tolist(), strict=True):
+        velocity.append(x0 * a_b / ab - x1 * b / a_ba + x2 * a / b_ba)
+        acceleration.append(2.0 * (x0 / ab - x1 / a_ba + x2 / b_ba))
+    return np.array(velocity), np.array(acceleration)
 
 
 class Take(NamedTuple):
@@ -210,7 +251,6 @@ class RobotSampler:
         self.watchdog_ns = seconds_to_ns(config.watchdog)
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
-        self._acceleration: np.ndarray | None = None  # of the newest state, when known
         self._intervals: deque[int] = deque(maxlen=PERIOD_INTERVALS)
         self.driver_period_ns = 0  # median stamp interval; 0 before two states
         self.sampling = False
@@ -260,9 +300,10 @@ class RobotSampler:
                 ordered = sorted(self._intervals)  # 15 ints: a tenth of numpy.median's cost
                 n = len(ordered)
                 self.driver_period_ns = int((ordered[(n - 1) // 2] + ordered[n // 2]) / 2)
-        velocity = self.velocity.update(stamp, state.position)
-        self._acceleration = self.velocity.acceleration
-        if state.velocity is not None:
+        if state.velocity is None:
+            velocity = self.velocity.update(stamp, state.position)
+        else:  # the driver's velocity; the estimate's acceleration only if _take carries it
+            self.velocity.add(stamp, state.position)
             velocity = state.velocity
         self.newest = JointSample(stamp, state.position, velocity, state.effort)
         if not self.sampling:
@@ -316,7 +357,7 @@ class RobotSampler:
         position, velocity = newest.position, newest.velocity
         if offset:
             a = -offset * 1e-9
-            acceleration = self._acceleration
+            acceleration = self.velocity.newest_acceleration()
             if acceleration is None:
                 position = position + a * velocity
             else:

@@ -74,6 +74,8 @@ TRIGGERS: tuple[str, ...] = ("tracking_error", "input_gain", "residual", "satura
 #: The fallback laws offered (by their names in :data:`apc_feedback.laws.LAWS`).
 FALLBACKS: tuple[str, ...] = ("computed_torque", "pid")
 ADAPTIVE, FALLBACK = "adaptive", "fallback"
+# The ufunc reduction, without ndarray.any's Python wrapper (every sample).
+_any = np.logical_or.reduce
 
 
 class SupervisorError(SettingError):
@@ -303,7 +305,7 @@ class Supervisor:
         # a residual or a clipped run alone is no loss of the arm (a move's start, a payload's
         # jolt): they trip only with the error beyond suspicion_error.
         suspicions = (self._residual(residual), self._saturation(clipped))
-        off_path = bool((error > self.config.suspicion_error).any())
+        off_path = bool(_any(error > self.config.suspicion_error))
         trigger = self._tracking_error() or self.input_gain(law, off_path)
         if trigger is None and off_path:
             trigger = next((s for s in suspicions if s is not None), None)
@@ -341,7 +343,7 @@ class Supervisor:
         if len(errors) < errors.maxlen:
             return None
         (e_then, v_then), (e, v) = errors[0], errors[-1]
-        if ((e > self.bound) & (e > e_then) & (v >= v_then)).any():
+        if _any((e > self.bound) & (e > e_then) & (v >= v_then)):
             return "tracking_error"
         return None
 
@@ -361,11 +363,11 @@ class Supervisor:
         n, config = self.n_joints, self.config
         g0, g = prior[n:], law.identified_input_gain[n:]
         ratio = g.diagonal() / g0.diagonal()
-        if (ratio <= 0.0).any() or (ratio >= config.gain_high).any():
+        if _any(ratio <= 0.0) or _any(ratio >= config.gain_high):
             return "input_gain"
         if not off_path:
             return None
-        if (ratio <= config.gain_low).any():
+        if _any(ratio <= config.gain_low):
             return "input_gain"
         try:
             relative = np.linalg.solve(g0, g)
@@ -378,7 +380,7 @@ class Supervisor:
     def _residual(self, residual: np.ndarray | None) -> str | None:
         if residual is None:
             return None
-        norm = float(np.linalg.norm(residual))
+        norm = math.sqrt(float(np.dot(residual, residual)))  # np.linalg.norm's own sum
         mean = self._residual_mean
         self._residual_mean = mean + self._decay * (norm - mean)
         config = self.config

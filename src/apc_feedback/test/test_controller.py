@@ -15,7 +15,7 @@ from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
 from apc_feedback.linearize import initial_model
-from apc_feedback.optimal import one_step_control
+from apc_feedback.optimal import one_step_control, receding_horizon_control
 
 rng = np.random.default_rng(7)
 
@@ -352,3 +352,52 @@ def test_lagged_law_splits_g0_by_the_expected_delay(controller_robot):
     np.testing.assert_allclose(law.prior_input_gain, G0, rtol=1e-12, atol=1e-15)
     with pytest.raises(FeedbackError, match="delay"):
         law.expect_input_delay(-1.0)
+
+
+def _lagged_model(law, dx):
+    """The recommended law's model as a fresh set of arrays, from the identifier's estimate:
+    state (δx, δu(k-1) … δu(k-L), ξ), the lags' shift, the integral's rows."""
+    n, T = law.n_joints, law.config.period
+    lags = law.config.input_lags
+    p, s = 2 * n, 2 * n + lags * n
+    G_all = law.rls.G
+    F = np.zeros((s + n, s + n))
+    F[:p, :p] = law.rls.F
+    F[:p, p:s] = G_all[:, n:]
+    F[p + n : s, p : s - n] = np.eye((lags - 1) * n)
+    F[s:, :s] = T * F[:n, :s]
+    F[s:, s:] = np.eye(n)
+    G = np.zeros((s + n, n))
+    G[:p] = G_all[:, :n]
+    G[p : p + n] = np.eye(n)
+    G[s:] = T * G[:n]
+    w = np.zeros(s + n)
+    w[:p] = law.rls.w
+    w[s:] = T * w[:n]
+    inputs = law._inputs[:lags].ravel()
+    x = np.concatenate([dx, inputs, law.integral])
+    Q = np.diag(np.concatenate([law.Q.diagonal(), np.zeros(lags * n), np.full(n, 1e6)]))
+    return F, G, w, Q, x
+
+
+def test_recommended_law_controls_its_lagged_integral_model(controller_robot):
+    """The recommended preset's du is the receding-horizon control of the lagged model with
+    the integral, built afresh from the estimate (the law writes only the identified blocks
+    into its buffers every sample, the constant ones once)."""
+    from apc_feedback.presets import recommended_settings
+
+    model = controller_robot.model
+    config = AdaptiveConfig.from_dict({**recommended_settings(), "period": 0.01})
+    assert config.input_lags == 2 and config.q_integral == 1e6
+    law = AdaptiveFeedback(model, config)
+    data = model.createData()
+    applied = None
+    for k in range(6):
+        q, qd, q_d, qd_d, qdd_d = _random_sample()
+        u_n = pin.rnea(model, data, q_d, qd_d, qdd_d)
+        out = law.update(k, q, qd, q_d, qd_d, qdd_d, u_n, applied)
+        dx = np.concatenate([q - q_d, qd - qd_d])
+        F, G, w, Q, x = _lagged_model(law, dx)
+        expected = receding_horizon_control(F, G, w, Q, law.R, x, config.horizon + 2)
+        np.testing.assert_array_equal(out.du, expected)
+        applied = u_n + out.du

@@ -9,8 +9,10 @@ from scipy.optimize import minimize
 from apc_feedback.optimal import (
     ControlError,
     OneStepControl,
+    RecedingHorizonControl,
     one_step_control,
     one_step_cost,
+    receding_horizon_control,
     validate_weights,
 )
 
@@ -249,3 +251,40 @@ def test_one_step_control_object_rejects_bad_weights_and_singular_systems() -> N
         bad[row, col] = np.nan
         with pytest.raises(ControlError, match="R \\+ Gᵀ Q G"):
             control(bad, np.ones(2))
+
+
+# ------------------------------------------------------------------------- receding horizon
+@pytest.mark.parametrize("horizon", [1, 2, 5])
+@pytest.mark.parametrize(("n", "p"), [(1, 2), (3, 18), (7, 42)])
+def test_receding_horizon_object_equals_the_function(horizon: int, n: int, p: int) -> None:
+    """RecedingHorizonControl (buffers made once) gives receding_horizon_control's bits: the
+    same operations in the same order."""
+    rng = np.random.default_rng(60 + n + horizon)
+    q_diagonal = rng.uniform(0.0, 1e3, p)
+    R = 1e-6 * np.eye(n)
+    control = RecedingHorizonControl(q_diagonal, R, horizon)
+    for _ in range(10):
+        F = np.eye(p) + 0.1 * rng.standard_normal((p, p))
+        G, w, x = rng.standard_normal((p, n)), rng.standard_normal(p), rng.standard_normal(p)
+        expected = receding_horizon_control(F, G, w, np.diag(q_diagonal), R, x, horizon)
+        np.testing.assert_array_equal(control(F, G, w, x), expected)
+    # With horizon 1 it is Eq. 35 (corrected); a fresh array each call.
+    first = control(F, G, w, x)
+    assert first is not control(F, G, w, x)
+    if horizon == 1:
+        one_step = one_step_control(F, G, w, np.diag(q_diagonal), R, x)
+        np.testing.assert_allclose(first, one_step, rtol=1e-9, atol=1e-12)
+
+
+def test_receding_horizon_object_rejects_bad_settings_and_singular_systems() -> None:
+    with pytest.raises(ControlError, match="horizon"):
+        RecedingHorizonControl(np.ones(2), np.eye(1), 0)
+    with pytest.raises(ControlError, match="Q must be positive semidefinite"):
+        RecedingHorizonControl(np.array([1.0, -1.0]), np.eye(1), 2)
+    with pytest.raises(ControlError, match="R must be positive definite"):
+        RecedingHorizonControl(np.ones(2), np.zeros((1, 1)), 2)
+    control = RecedingHorizonControl(np.ones(2), np.eye(1), 3)
+    F, G, w = np.eye(2), np.ones((2, 1)), np.zeros(2)
+    assert np.isfinite(control(F, G, w, np.ones(2))).all()
+    with pytest.raises(ControlError, match="R \\+ Gᵀ Q G"):
+        control(F, np.full((2, 1), np.nan), w, np.ones(2))

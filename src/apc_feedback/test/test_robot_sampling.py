@@ -217,6 +217,22 @@ def test_velocity_is_exact_for_a_constant_acceleration():
     assert est.update(5 * MS, np.array([1.0])) == pytest.approx([1.5 / 1e-3])
 
 
+def test_added_states_give_the_acceleration_update_gives():
+    """A driver that sends its velocity: states added without an estimate give, when asked,
+    the acceleration that estimating at every state gives (the same bits)."""
+    rng = np.random.default_rng(5)
+    every, lazy = VelocityEstimator(window_ns=3 * MS), VelocityEstimator(window_ns=3 * MS)
+    for i in range(40):
+        stamp, position = i * MS + int(rng.integers(0, 300_000)), rng.normal(size=3)
+        every.update(stamp, position)
+        lazy.add(stamp, position)
+        if i % 3 == 0:
+            expected, got = every.acceleration, lazy.newest_acceleration()
+            assert (got is None) == (expected is None)
+            if got is not None:
+                np.testing.assert_array_equal(got, expected)
+
+
 def test_velocity_noise_and_lag_are_as_documented():
     """sqrt(26) sigma / w of noise over a span w; no lag on a smooth signal (1 kHz, 10 ms)."""
     rng = np.random.default_rng(3)

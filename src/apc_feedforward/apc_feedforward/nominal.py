@@ -53,7 +53,7 @@ def nominal_torque(
 ) -> np.ndarray:
     """``u_n = D(q) qdd + h(q, qd) + c(q)`` by recursive Newton-Euler (Eqs. 2-8), shape (n,)."""
     tau = pin.rnea(model, data, q, qd, qdd)
-    if not np.all(np.isfinite(tau)):
+    if not np.logical_and.reduce(np.isfinite(tau)):  # np.all's wrapper costs more (per sample)
         raise FeedforwardError("nominal torque is not finite (check the set point)")
     return np.array(tau, dtype=float)
 
