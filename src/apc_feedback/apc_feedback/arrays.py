@@ -1,5 +1,6 @@
 """The check at every numeric boundary of the laws: a value is a finite float64 array of exactly
-the shape asked for, or the caller's error names what is wrong with it."""
+the shape asked for, or the caller's error names what is wrong with it; and the reductions the
+per-sample checks use."""
 
 from __future__ import annotations
 
@@ -22,3 +23,10 @@ def finite_array(
     if not np.isfinite(a).all():
         raise error(f"{name} must be finite")
     return a
+
+
+#: ``any`` / ``all`` of a boolean array as the bare ufunc reductions: ``np.any`` and
+#: ``ndarray.all`` add a Python wrapper that costs more than the reduction at a joint state's
+#: size, on checks that run every sample.
+any_true = np.logical_or.reduce
+all_true = np.logical_and.reduce

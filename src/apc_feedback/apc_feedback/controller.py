@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
+from apc_feedback.arrays import all_true
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
     OneStepControl,
@@ -310,7 +311,7 @@ class AdaptiveFeedback(FeedbackLaw):
             diagonal = self._input_gain(velocity_rows=True).diagonal()
         else:  # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
             diagonal = self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal()
-        return bool(_all(diagonal > 0.0))
+        return bool(all_true(diagonal > 0.0))
 
     def _input_gain(self, velocity_rows: bool = False) -> np.ndarray:
         """:attr:`identified_input_gain` (a fresh array) from the identifier's Θᵀ without a
@@ -446,7 +447,3 @@ def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
     """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (rows, (L+1) n): the effect of an input held
     over every lag's period (a fresh array)."""
     return np.add.reduce(G.reshape(G.shape[0], -1, n), axis=1)
-
-
-# The ufunc reductions, without ndarray.all's Python wrapper.
-_all = np.logical_and.reduce

@@ -34,7 +34,7 @@ from typing import Any, Literal
 import numpy as np
 from scipy.linalg import lapack
 
-from apc_feedback.arrays import finite_array
+from apc_feedback.arrays import all_true, finite_array
 
 __all__ = [
     "ControlError",
@@ -129,16 +129,29 @@ def _weights(Q: Any, R: Any, p: int, n: int, check: bool) -> tuple[np.ndarray, n
     return np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
 
 
-def _solve_spd(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def _solve_spd(S: np.ndarray, rhs: np.ndarray, finite: np.ndarray | None = None) -> np.ndarray:
     """Solve ``S X = rhs`` for the symmetric positive definite ``S = R + Gᵀ Q G`` by Cholesky
     (LAPACK ``dposv`` from the upper triangle: a fifth of ``numpy.linalg.solve`` at these
-    sizes, and no symmetrising copy)."""
+    sizes, and no symmetrising copy). ``finite``, a boolean buffer of ``rhs``'s shape, takes
+    the finiteness check's temporary (a per-sample caller's)."""
     _, X, info = lapack.dposv(S, rhs)
     if info != 0:
         raise ControlError("R + Gᵀ Q G is not positive definite (check R)")
-    if not np.isfinite(X).all():
+    if not all_true(np.isfinite(X, out=finite), axis=None):
         raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
     return X
+
+
+def _diagonal_weights(q_diagonal: Any, R: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(q, Q, R)`` of a per-sample controller: the diagonal ``q`` of ``Q`` (shape (p,)),
+    ``Q = diag(q)`` and ``R`` (n, n), checked by :func:`validate_weights`."""
+    q = np.array(q_diagonal, dtype=float)
+    if q.ndim != 1 or q.shape[0] < 1:
+        raise ControlError(f"q_diagonal must have shape (p,), got {q.shape}")
+    R = np.asarray(R, dtype=float)
+    n = R.shape[0] if R.ndim == 2 else 0
+    Q, R = validate_weights(np.diag(q), R, q.shape[0], n)
+    return q, Q, R
 
 
 # ---------------------------------------------------------------------------------- public API
@@ -228,13 +241,8 @@ class OneStepControl:
     def __init__(self, q_diagonal: Any, R: Any, form: Form = "exact") -> None:
         if form not in _FORMS:
             raise ControlError(f"form must be one of {', '.join(_FORMS)}, got {form!r}")
-        q = np.array(q_diagonal, dtype=float)
-        if q.ndim != 1 or q.shape[0] < 1:
-            raise ControlError(f"q_diagonal must have shape (p,), got {q.shape}")
-        p = q.shape[0]
-        R = np.asarray(R, dtype=float)
-        n = R.shape[0] if R.ndim == 2 else 0
-        _, R = validate_weights(np.diag(q), R, p, n)
+        q, _, R = _diagonal_weights(q_diagonal, R)
+        p, n = q.shape[0], R.shape[0]
         self.p, self.n = p, n
         self.q_diagonal = q
         self.R = R
@@ -401,13 +409,8 @@ class RecedingHorizonControl:
     def __init__(self, q_diagonal: Any, R: Any, horizon: int) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
             raise ControlError(f"horizon must be an integer >= 1, got {horizon!r}")
-        q = np.array(q_diagonal, dtype=float)
-        if q.ndim != 1 or q.shape[0] < 1:
-            raise ControlError(f"q_diagonal must have shape (p,), got {q.shape}")
-        p = q.shape[0]
-        R = np.asarray(R, dtype=float)
-        n = R.shape[0] if R.ndim == 2 else 0
-        Q, self.R = validate_weights(np.diag(q), R, p, n)
+        q, Q, self.R = _diagonal_weights(q_diagonal, R)
+        p, n = q.shape[0], self.R.shape[0]
         self.p, self.n, self.horizon = p, n, int(horizon)
         # The augmented model and weight, their constant entries written once.
         self._A = np.zeros((p + 1, p + 1))
@@ -458,7 +461,7 @@ class RecedingHorizonControl:
             np.dot(B.T, PB, out=S)
             S += R  # R + Bᵀ P B
             np.dot(PB.T, A, out=BtPA)
-            K = self._solve(S, BtPA, self._finite_gain)  # (R + Bᵀ P B)⁻¹ Bᵀ P A
+            K = _solve_spd(S, BtPA, self._finite_gain)  # (R + Bᵀ P B)⁻¹ Bᵀ P A
             np.dot(P, A, out=self._PA)
             np.dot(PB, K, out=self._PBK)
             np.subtract(self._PA, self._PBK, out=self._PA)  # P A - P B K
@@ -472,15 +475,5 @@ class RecedingHorizonControl:
         S += R
         np.dot(A, self._s, out=self._As)
         np.dot(PB.T, self._As, out=self._b)  # Bᵀ P₁ A s
-        u = self._solve(S, self._b, self._finite_u)
+        u = _solve_spd(S, self._b, self._finite_u)
         return np.negative(u, out=u)
-
-    @staticmethod
-    def _solve(S: np.ndarray, rhs: np.ndarray, finite: np.ndarray) -> np.ndarray:
-        """:func:`_solve_spd` with the finiteness check into ``finite`` (no temporary)."""
-        _, X, info = lapack.dposv(S, rhs)
-        if info != 0:
-            raise ControlError("R + Gᵀ Q G is not positive definite (check R)")
-        if not np.logical_and.reduce(np.isfinite(X, out=finite), axis=None):
-            raise ControlError("R + Gᵀ Q G is too ill-conditioned: the solution is not finite")
-        return X

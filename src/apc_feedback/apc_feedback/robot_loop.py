@@ -67,16 +67,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from apc_feedback.arrays import all_true, any_true
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
 from apc_feedforward.nominal import Setpoint
 from apc_msgs_py import JointSample, TrajectoryGoal
-
-# The ufunc reductions, without the Python wrappers of np.any and ndarray.all (per sample).
-_any = np.logical_or.reduce
-_all = np.logical_and.reduce
 
 
 class CommandMap:
@@ -117,7 +114,7 @@ class CommandMap:
         """The command row (a new array), each joint clipped counted."""
         row = torque[self.order]
         over = np.abs(row) > self.limit
-        if _any(over):
+        if any_true(over):
             for i in np.flatnonzero(over):
                 self._count(self._clipped[i])
             np.clip(row, -self.limit, self.limit, out=row)
@@ -329,7 +326,7 @@ class RobotLoop:
         assert sample.position is not None and sample.velocity is not None
         error = np.abs(sample.position - setpoint.q)
         tolerance = self.path_tolerance
-        if _any(setpoint.qd != 0.0) and _any((tolerance > 0.0) & (error > tolerance)):
+        if any_true(setpoint.qd != 0.0) and any_true((tolerance > 0.0) & (error > tolerance)):
             j = int(np.argmax(np.where(tolerance > 0.0, error - tolerance, -np.inf)))
             self.count("path_tolerance_aborts")
             self.log(
@@ -381,7 +378,7 @@ class RobotLoop:
         k = args[0]
         try:
             out = law.update(*args, u_n, applied)
-            if not _all(np.isfinite(u_n + out.du)):
+            if not all_true(np.isfinite(u_n + out.du)):
                 raise ValueError(f"u_n + du is not finite at sample {k}")
         except ValueError as exc:  # FeedbackError is one
             self.count("feedback_law_errors")
@@ -419,7 +416,7 @@ class RobotLoop:
         out = self._update(self.law, args, u_n, applied)
         if out is None:
             return None
-        clipped = bool(_any(np.abs(u_n + out.du) > self._limit))
+        clipped = bool(any_true(np.abs(u_n + out.du) > self._limit))
         trigger = supervisor.update(k, error, error_qd, self.law, out.residual, clipped)
         if trigger is None:
             return out

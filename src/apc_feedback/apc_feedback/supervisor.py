@@ -65,6 +65,7 @@ import numpy as np
 
 from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Robot
+from apc_feedback.arrays import any_true
 from apc_feedback.baselines import PdGains
 from apc_feedback.controller import FeedbackLaw
 from apc_feedback.laws import make_law
@@ -74,8 +75,6 @@ TRIGGERS: tuple[str, ...] = ("tracking_error", "input_gain", "residual", "satura
 #: The fallback laws offered (by their names in :data:`apc_feedback.laws.LAWS`).
 FALLBACKS: tuple[str, ...] = ("computed_torque", "pid")
 ADAPTIVE, FALLBACK = "adaptive", "fallback"
-# The ufunc reduction, without ndarray.any's Python wrapper (every sample).
-_any = np.logical_or.reduce
 
 
 class SupervisorError(SettingError):
@@ -305,7 +304,7 @@ class Supervisor:
         # a residual or a clipped run alone is no loss of the arm (a move's start, a payload's
         # jolt): they trip only with the error beyond suspicion_error.
         suspicions = (self._residual(residual), self._saturation(clipped))
-        off_path = bool(_any(error > self.config.suspicion_error))
+        off_path = bool(any_true(error > self.config.suspicion_error))
         trigger = self._tracking_error() or self.input_gain(law, off_path)
         if trigger is None and off_path:
             trigger = next((s for s in suspicions if s is not None), None)
@@ -343,7 +342,7 @@ class Supervisor:
         if len(errors) < errors.maxlen:
             return None
         (e_then, v_then), (e, v) = errors[0], errors[-1]
-        if _any((e > self.bound) & (e > e_then) & (v >= v_then)):
+        if any_true((e > self.bound) & (e > e_then) & (v >= v_then)):
             return "tracking_error"
         return None
 
@@ -363,11 +362,11 @@ class Supervisor:
         n, config = self.n_joints, self.config
         g0, g = prior[n:], law.identified_input_gain[n:]
         ratio = g.diagonal() / g0.diagonal()
-        if _any(ratio <= 0.0) or _any(ratio >= config.gain_high):
+        if any_true(ratio <= 0.0) or any_true(ratio >= config.gain_high):
             return "input_gain"
         if not off_path:
             return None
-        if _any(ratio <= config.gain_low):
+        if any_true(ratio <= config.gain_low):
             return "input_gain"
         try:
             relative = np.linalg.solve(g0, g)
