@@ -71,7 +71,7 @@ def one_run(
         effects=ARM_EFFECTS[arm]() if effects == "physical" else None,
         arm=scenario,
     )
-    errors = np.array([np.rad2deg(np.abs(e[1] - e[2])) for e in run.log if len(e) == 3])
+    errors = run.tracking_error_deg()
     return {
         "max_deg": errors.max(axis=0).round(3).tolist(),
         "final_deg": errors[-1].round(3).tolist(),

@@ -94,9 +94,13 @@ class RobotRun:
         """Largest |q - q0| over the run (a hold's sag), deg."""
         return float(np.rad2deg(np.max(np.abs(self.q - self.q0))))
 
+    def tracking_error_deg(self) -> np.ndarray:
+        """|q - q_d| at each sample, per joint, deg: shape (samples, n)."""
+        return np.array([np.rad2deg(np.abs(e[1] - e[2])) for e in self.log if len(e) == 3])
+
     def max_tracking_error_deg(self) -> float:
         """Largest |q - q_d| at the samples, deg."""
-        return float(max(np.rad2deg(np.max(np.abs(e[1] - e[2]))) for e in self.log if len(e) == 3))
+        return float(self.tracking_error_deg().max())
 
 
 def run_robot_loop(
