@@ -13,11 +13,11 @@ wall time has and simulated time has not), and per law: the recommended preset a
 supervised with the computed-torque fallback (the default) and with the PID fallback.
 
 A physical arm's run is chaotic in its inputs: the payload's fifth digit can move the worst
-error from 1 to 45 deg. So every cell is five runs that differ as real runs do, the payload
+error from 1 to 38 deg. So every cell is five runs that differ as real runs do, the payload
 within ±1 % (:data:`PAYLOAD_FACTORS`) and, with late commands, the draws (seeds 0-4), and
 reports the median and the worst run's max error over the joints, the worst final error
-(deg, at the samples), the runs beyond 10 deg ("lost", the wall-time benchmark's rule) and the
-runs with a hand-over. About a minute and a half on one core.
+(deg, at the samples), the runs beyond :data:`apc_lab.wall_clock.LOST_DEG` ("lost", the
+wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms puma3 panda] [--json FILE]
 """
@@ -33,13 +33,13 @@ import numpy as np
 from apc_feedback.supervisor import SupervisorConfig
 from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
 from apc_lab.robot_offline import Latency, run_robot_loop
+from apc_lab.wall_clock import LOST_DEG
 
 ARMS = ("puma3", "panda")
 EFFECTS = ("ideal", "physical")
 RATES_HZ = (100, 250, 500, 1000)
 #: The runs of a cell: the payload times these (run i also draws late commands with seed i).
 PAYLOAD_FACTORS = (1.0, 0.99, 0.995, 1.005, 1.01)
-LOST_DEG = 10.0
 #: law label -> supervisor (None: the adaptive law alone).
 LAWS: dict[str, SupervisorConfig | None] = {
     "adaptive alone": None,
