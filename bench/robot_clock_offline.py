@@ -19,7 +19,10 @@ reports the median and the worst run's max error over the joints, the worst fina
 (deg, at the samples), the runs beyond :data:`apc_lab.wall_clock.LOST_DEG` ("lost", the
 wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
 
-    .venv/bin/python bench/robot_clock_offline.py [--arms puma3 panda] [--json FILE]
+    .venv/bin/python bench/robot_clock_offline.py [--arms puma3 panda] [--relinearize] [--json FILE]
+
+``--relinearize``: the recommended preset with ``adaptive.relinearize`` (the model's prior
+follows the set point) instead of as shipped.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from apc_feedback.presets import recommended_settings
 from apc_feedback.supervisor import SupervisorConfig
 from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
 from apc_lab.robot_offline import Latency, run_robot_loop
@@ -55,6 +59,7 @@ def one_run(
     late: bool,
     index: int,
     supervisor: SupervisorConfig | None,
+    settings: dict | None = None,
 ) -> dict:
     """Run ``index`` of a cell: max and final error per joint (deg), hand-overs."""
     scenario = arm_scenario(arm, "c")
@@ -70,6 +75,7 @@ def one_run(
         supervisor=supervisor,
         effects=ARM_EFFECTS[arm]() if effects == "physical" else None,
         arm=scenario,
+        settings=settings,
     )
     errors = run.tracking_error_deg()
     return {
@@ -79,7 +85,9 @@ def one_run(
     }
 
 
-def measure(arms: tuple[str, ...] = ARMS) -> list[dict]:
+def measure(arms: tuple[str, ...] = ARMS, settings: dict | None = None) -> list[dict]:
+    """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
+    preset)."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -87,7 +95,7 @@ def measure(arms: tuple[str, ...] = ARMS) -> list[dict]:
                 for late in (False, True):
                     for law, supervisor in LAWS.items():
                         runs = [
-                            one_run(arm, effects, rate, late, i, supervisor)
+                            one_run(arm, effects, rate, late, i, supervisor, settings)
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
                         worst = [max(r["max_deg"]) for r in runs]
@@ -150,12 +158,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     parser.add_argument("--json", type=Path, help="write the cells here")
+    parser.add_argument(
+        "--relinearize",
+        action="store_true",
+        help="the recommended preset with adaptive.relinearize (the prior follows the set point)",
+    )
     args = parser.parse_args()
-    cells = measure(tuple(args.arms))
+    settings = {**recommended_settings(), "relinearize": True} if args.relinearize else None
+    cells = measure(tuple(args.arms), settings)
     print()
     print(markdown(cells), end="")
     if args.json:
-        doc = {"simulated_time": True, "cells": cells}
+        doc = {"simulated_time": True, "relinearize": args.relinearize, "cells": cells}
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
 
 

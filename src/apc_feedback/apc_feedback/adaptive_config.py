@@ -90,6 +90,16 @@ class AdaptiveConfig:
         the delay only to a driver period); small: the split held where ``input_delay`` puts
         it and only the total learnt (a delay known exactly; closed-loop data let the lags
         trade effect between them: docs/paper.md, "What a physical arm adds").
+    relinearize : bool
+        The model's prior follows the set point: every sample, Eq. 33 at that sample's
+        ``(q_d, qd_d, u_n)`` (split by the delay as ``Ĝ(0)``), and the RLS estimate is kept as a
+        deviation from it (moved by the prior's change, ``P`` and ``ŵ`` kept). The RLS then
+        learns what the controller's model lacks (payload, inertia error, delay), not how the
+        arm's inertia changes along a move: a light arm whose mass matrix changes by a factor
+        within a move (the Panda's joints 1 and 3 line up as joint 2 crosses 0) otherwise
+        outruns the identifier and the law over-corrects. With it the supervisor's input-gain
+        region is taken around the prior of the current set point. False (default): the
+        paper's prior, Eq. 33 at the first nominal point only.
     identify_min_speed : float
         No identification step while a joint's measured speed is below this at ``k-1`` or
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
@@ -174,6 +184,10 @@ class AdaptiveConfig:
         "P(0) of the lags' split relative to alpha_model: 1 = learnt, small = held",
         1e-12,
         1.0,
+    )
+    relinearize: bool = setting(
+        False,
+        "the model's prior follows the set point (Eq. 33 each sample, RLS learns the deviation)",
     )
     identify_min_speed: float = setting(
         0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3

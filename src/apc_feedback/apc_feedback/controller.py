@@ -143,6 +143,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
         self._effort_floor = -self._effort_limit
         self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
+        self._data = model.createData()
         self._input_delay = config.input_delay
         self._set_weights(config)
         self.reset()
@@ -183,6 +184,7 @@ class AdaptiveFeedback(FeedbackLaw):
         n = self.n_joints
         self._started = False
         self._prior_input_gain: np.ndarray | None = None
+        self._prior_model: np.ndarray | None = None  # [F G] of the prior the estimate is about
         self.rejected_updates = 0
         self.projected_updates = 0
         self.skipped_updates = 0
@@ -226,20 +228,15 @@ class AdaptiveFeedback(FeedbackLaw):
         rejected = skipped = False
         stuck = self._stuck(qd)
         trace_p = float("nan")
-        if not self._started:
+        starting = not self._started
+        if starting:
             lags = self.config.input_lags
-            F0, G0 = initial_model(
-                self.model,
-                q_d,
-                qd_d,
-                u_n,
-                self.config.period,
-                self.config.initial_model,
-                delay=self._input_delay if lags else 0.0,
-                input_lags=lags,
-            )
+            F0, G0 = self._linearize(q_d, qd_d, u_n)
             self.rls.reset(F0, G0, P0=self._initial_p(G0))
             self._prior_input_gain = _summed_inputs(G0, self.n_joints)
+            self._prior_model = None
+            if self.config.relinearize:
+                self._prior_model = np.hstack((F0, G0))
             # Before the first sample the arm is taken to hold its nominal torque (δu = 0), as
             # Eq. 16's first step takes it: identification starts at sample 1 with or without lags.
             self._inputs.fill(0.0)
@@ -268,6 +265,8 @@ class AdaptiveFeedback(FeedbackLaw):
                 # Keep controlling with the last good estimate; the node counts and reports it.
                 rejected = True
                 self.rejected_updates += 1
+        if self._prior_model is not None and not starting:
+            self._follow_setpoint(q_d, qd_d, u_n)
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
         du = self._control(dx)
@@ -277,10 +276,38 @@ class AdaptiveFeedback(FeedbackLaw):
         self._k_prev = k
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
 
+    def _linearize(
+        self, q_d: np.ndarray, qd_d: np.ndarray, u_n: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 33's ``F, G`` at a set point, ``G`` split by the expected delay with lags."""
+        lags = self.config.input_lags
+        return initial_model(
+            self.model,
+            q_d,
+            qd_d,
+            u_n,
+            self.config.period,
+            self.config.initial_model,
+            delay=self._input_delay if lags else 0.0,
+            input_lags=lags,
+            data=self._data,
+        )
+
+    def _follow_setpoint(self, q_d: np.ndarray, qd_d: np.ndarray, u_n: np.ndarray) -> None:
+        """Move the estimate with its prior to this sample's set point (``relinearize``): the
+        identification step just taken was about the previous sample's prior."""
+        F, G = self._linearize(q_d, qd_d, u_n)
+        prior = np.hstack((F, G))
+        assert self._prior_model is not None
+        self.rls.shift_model(prior - self._prior_model)
+        self._prior_model = prior
+        self._prior_input_gain = _summed_inputs(G, self.n_joints)
+
     @property
     def prior_input_gain(self) -> np.ndarray | None:
         """Eq. 33's ``G(0)`` at the first sample since the last :meth:`reset` (the effect of a
-        perturbation held over one period), shape (2n, n); None before that sample."""
+        perturbation held over one period), shape (2n, n); with ``relinearize`` Eq. 33's ``G``
+        at the latest sample's set point; None before the first sample."""
         return self._prior_input_gain
 
     @property

@@ -201,16 +201,18 @@ def initial_model(
     *,
     delay: float = 0.0,
     input_lags: int = 0,
+    data: pin.Data | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``F(0), G(0)`` of Eq. 33 at the first nominal point ``(q_d(0), qd_d(0), u_n(0))``;
-    with ``input_lags``, ``G(0)`` split by ``delay`` (:func:`split_input_matrix`).
+    with ``input_lags``, ``G(0)`` split by ``delay`` (:func:`split_input_matrix`). ``data``:
+    the model's workspace, for a caller that linearises every sample (made here if None).
 
     Returns
     -------
     F0 : (2n, 2n) ndarray
     G0 : (2n, n) ndarray, or (2n, (L+1) n) with lags
     """
-    A, B = continuous_jacobians(model, model.createData(), q, qd, tau)
+    A, B = continuous_jacobians(model, model.createData() if data is None else data, q, qd, tau)
     F, G = discretize_series(A, B, period, form)
     if input_lags == 0 and delay == 0.0:
         return F, G

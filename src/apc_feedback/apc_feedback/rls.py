@@ -298,6 +298,22 @@ class Rls:
         self._k = 0
         self._can_undo = False
 
+    def shift_model(self, delta: np.ndarray) -> None:
+        """Add ``delta`` to the estimate's ``[F̂ Ĝ]`` (shape (2n, 2n + (L+1) n)), ``P`` and
+        ``ŵ`` kept: the prior the estimate is a deviation from has moved by ``delta`` (the
+        feedback law's model re-linearised at a new set point). The last update can no longer
+        be taken back.
+
+        Raises
+        ------
+        RlsError
+            On a wrong shape or a non-finite entry (the estimate is unchanged then).
+        """
+        p, q = self._p, self._q
+        delta = _matrix("delta", delta, (p, p + q))
+        self._views[self._cur].theta_t[:, : p + q] += delta
+        self._can_undo = False
+
     def undo(self) -> None:
         """Take back the last :meth:`update` (Θ, P and the count), e.g. when a projection
         onto physically possible parameters refuses its result.

@@ -401,3 +401,52 @@ def test_recommended_law_controls_its_lagged_integral_model(controller_robot):
         expected = receding_horizon_control(F, G, w, Q, law.R, x, config.horizon + 2)
         np.testing.assert_array_equal(out.du, expected)
         applied = u_n + out.du
+
+
+@pytest.mark.parametrize("lags", [0, 2])
+def test_relinearize_moves_the_model_with_the_set_point(controller_robot, lags):
+    """``relinearize``: at each sample the estimate is Eq. 33 at that sample's set point plus
+    what the identifier learnt; across a gap (no identification step) that is Eq. 33 at the new
+    set point exactly, and the supervisor's prior input gain is its ``G``. Without it the model
+    stays at the first set point's."""
+    model = controller_robot.model
+    data = model.createData()
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, data, q_d, qd_d, qdd_d)
+    later = q_d + np.array([0.6, -0.8, 0.9]), qd_d + 1.0, qdd_d
+    u_later = pin.rnea(model, data, *later)
+    settings = {"input_lags": lags, "input_delay": 0.004 * lags}
+    for relinearize in (True, False):
+        law = AdaptiveFeedback(model, AdaptiveConfig(relinearize=relinearize, **settings))
+        law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+        out = law.update(2, q, qd, *later, u_later, None)  # 1 is missing: no identification
+        assert out.skipped
+        at = (later[0], later[1], u_later) if relinearize else (q_d, qd_d, u_n)
+        F, G = initial_model(model, *at, 0.01, delay=0.004 * lags if lags else 0.0, input_lags=lags)
+        np.testing.assert_allclose(law.rls.F, F, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(law.rls.G, G, rtol=0, atol=1e-12)
+        gain = G.reshape(6, -1, 3).sum(axis=1)
+        np.testing.assert_allclose(law.prior_input_gain, gain, rtol=0, atol=1e-12)
+
+
+def test_relinearize_keeps_what_was_identified(controller_robot):
+    """An identification step's correction to the prior survives the prior's move: after a
+    step at the first set point and a move, the estimate minus Eq. 33 at the new set point is
+    the learnt deviation."""
+    model = controller_robot.model
+    data = model.createData()
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, data, q_d, qd_d, qdd_d)
+    law = AdaptiveFeedback(model, AdaptiveConfig(relinearize=True, alpha=10.0))
+    law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    out = law.update(1, q + 0.01, qd - 0.2, q_d, qd_d, qdd_d, u_n, u_n + 3.0)
+    assert out.residual is not None
+    F0, G0 = initial_model(model, q_d, qd_d, u_n, 0.01)
+    learnt_F, learnt_G = law.rls.F - F0, law.rls.G - G0
+    assert np.abs(learnt_G).max() > 1e-6
+    later = q_d + 0.3, qd_d, qdd_d
+    u_later = pin.rnea(model, data, *later)
+    law.update(3, q, qd, *later, u_later, None)
+    F1, G1 = initial_model(model, later[0], later[1], u_later, 0.01)
+    np.testing.assert_allclose(law.rls.F - F1, learnt_F, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(law.rls.G - G1, learnt_G, rtol=0, atol=1e-12)

@@ -552,3 +552,29 @@ def test_model_view_is_read_only_and_follows_the_estimate() -> None:
     np.testing.assert_array_equal(rls.model_view(), rls.theta.T)
     rls.undo()
     np.testing.assert_array_equal(rls.model_view(), view)
+
+
+# ------------------------------------------------------------------------- a moving prior
+def test_shift_model_moves_f_and_g_and_keeps_w_and_p() -> None:
+    """``shift_model``: the prior moved by ``delta``; ŵ and P stay, the last update can no
+    longer be taken back, and a bad ``delta`` is refused with the estimate unchanged."""
+    rng = np.random.default_rng(3)
+    F, G, w = random_system(rng)
+    rls = Rls(N, RlsConfig(rho=0.98, alpha=100.0))
+    rls.reset(F, G)
+    z, dx_next = exciting_data(rng, F, G, w, 1)[0]
+    rls.update(z, dx_next)
+    before_F, before_G, before_w, before_P = rls.F, rls.G, rls.w, rls.P
+    delta = rng.standard_normal((P_DIM, P_DIM + N))
+    rls.shift_model(delta)
+    np.testing.assert_allclose(rls.F, before_F + delta[:, :P_DIM], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(rls.G, before_G + delta[:, P_DIM:], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(rls.w, before_w)
+    np.testing.assert_array_equal(rls.P, before_P)
+    with pytest.raises(RlsError, match="undo"):
+        rls.undo()
+    theta = rls.theta
+    for bad in (np.zeros((P_DIM, P_DIM)), np.full((P_DIM, P_DIM + N), np.nan)):
+        with pytest.raises(RlsError, match="delta"):
+            rls.shift_model(bad)
+        np.testing.assert_array_equal(rls.theta, theta)
