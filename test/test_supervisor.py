@@ -234,12 +234,18 @@ def _force_input_gain(scale: float, k0: int = 5050):
 
 
 def test_the_fallback_holds_an_arm_whose_input_gain_is_forced_wrong_and_hands_back():
-    """Measured: with Ĝ's sign flipped the unsupervised hold is lost (7100 deg); supervised the
+    """Measured: with Ĝ's sign flipped the unsupervised hold is lost (316 deg); supervised the
     input_gain trigger fires at once, computed torque holds within 1.81 deg (its sag under the
     5 lb it does not know), the adaptive law takes the joints back after the dwell and ends
-    0.000 deg off. Ĝ scaled by 0.01 instead is no loss (0.95 deg) and trips nothing."""
-    scaled = run_robot_loop(3.0, supervisor=SupervisorConfig(), setup=_force_input_gain(0.01))
-    assert scaled.max_deviation_deg() < 1.5 and not scaled.counts["supervisor.handovers"]
+    0.000 deg off. Ĝ scaled by 0.01 instead is no loss: the next sample lifts
+    it to a tenth of its prior and the law holds within 2.94 deg alone; supervised the error
+    passes the bound, growing, and computed torque holds it within 3.73 deg (0.95 and no
+    hand-over with the paper's prior, which has no floor)."""
+    scaled = _force_input_gain(0.01)
+    assert run_robot_loop(3.0, setup=scaled).max_deviation_deg() < 5.0
+    assert (
+        run_robot_loop(3.0, supervisor=SupervisorConfig(), setup=scaled).max_deviation_deg() < 5.0
+    )
     setup = _force_input_gain(-1.0)
     assert run_robot_loop(1.0, setup=setup).max_deviation_deg() > 90.0
     run = run_robot_loop(3.0, supervisor=SupervisorConfig(), setup=setup)
@@ -254,7 +260,7 @@ def test_the_fallback_holds_an_arm_whose_input_gain_is_forced_wrong_and_hands_ba
 
 def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_with_it():
     """A 100 Hz driver with 30 % of commands 6 ms late and Eq. 16's model (no input lags): the
-    hold is lost (128 deg); supervised it stays within 10 deg (measured 8.7: the fallback's
+    hold is lost (1169 deg); supervised it stays within 10 deg (measured 4.1: the fallback's
     computed torque sags under the unknown 5 lb with the gains a 100 Hz driver allows, Kp 400
     and Kv 40, where Kp 900 lost the Panda's wrist; three hand-overs, each hand-back after twice
     the dwell of the one before)."""
@@ -270,8 +276,8 @@ def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_
 
 def test_a_move_on_a_slow_driver_is_held_by_the_fallback_with_the_pid_too():
     """The paper's move on a 200 Hz driver with Eq. 16's model: unsupervised it is lost
-    (770 deg); supervised it stays bounded with either fallback (computed torque 6.5 deg, PID
-    7.4 deg: two or three hand-overs, the first when the error passes error_bound)."""
+    (930 deg); supervised it stays bounded with either fallback (computed torque 4.6 deg, PID
+    4.9 deg: one or two hand-overs, the first when the error passes error_bound)."""
     slow = dict(goal_deg=GOAL_DEG, driver_ms=5.0, settings=EQ16)
     assert run_robot_loop(2.0, **slow).max_tracking_error_deg() > 90.0
     for fallback, bound in (("computed_torque", 8.0), ("pid", 9.0)):
@@ -331,11 +337,12 @@ def test_commands_a_cycle_late_on_the_physical_puma_are_held_by_either_fallback(
 
 def test_on_a_100hz_driver_the_pid_fallback_holds_the_physical_puma_computed_torque_sags():
     """A command acts 2.5 driver periods after its state (the driver's cycle, the drive's own,
-    the differenced velocity): the law alone loses the arm (184 deg and more); the PID fallback
-    keeps it within 8 deg, the computed-torque fallback, at the gains a 100 Hz driver allows,
-    sags beyond the 10 deg the wall-time benchmark calls lost (13-18 deg)."""
+    the differenced velocity): the law alone loses the arm (beyond the 10 deg the wall-time
+    benchmark calls lost: 11.6-933 deg); the PID fallback keeps it within 7 deg, the
+    computed-torque fallback, at the gains a 100 Hz driver allows, sags beyond 10 deg
+    (11.7-16.7 deg)."""
     for payload in PAYLOADS_KG:
-        assert _physical(100, payload)[0] > 90.0
+        assert _physical(100, payload)[0] > 10.0
         pid, handovers = _physical(100, payload, supervisor=SupervisorConfig(fallback="pid"))
         assert pid < 9.0 and handovers >= 1
         computed_torque, _ = _physical(100, payload, supervisor=SupervisorConfig())

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
-from apc_feedback.arrays import all_true
+from apc_feedback.arrays import all_true, any_true
 from apc_feedback.linearize import initial_model
 from apc_feedback.optimal import (
     OneStepControl,
@@ -30,6 +30,18 @@ from apc_feedback.optimal import (
     validate_weights,
 )
 from apc_feedback.rls import Rls, RlsError
+
+#: With ``relinearize``, ``project_g`` keeps each diagonal entry of Ĝ's velocity block above
+#: this fraction of the current set point's prior (Eq. 33 there): it refuses identification
+#: steps that would leave one under it, and where the move to a new set point would, it scales
+#: that input's column up to it. An arm ten times heavier about a joint than its model is
+#: beyond any payload the prior leaves to the identifier. In
+#: closed loop a disturbance the law cancels (an unknown payload's torques along a move) makes
+#: the data say the torque does nothing, and the PUMA's Ĝ₁₁ drifts from 0.7 of the prior
+#: (the payload's true share) to 0 and below. Without ``relinearize`` the prior is the first set
+#: point's, from which the Panda's true gain moves 0.19-6.9 times on a move: no relative bound
+#: there, only the sign.
+RELATIVE_GAIN_FLOOR = 0.1
 
 
 class FeedbackOutput(NamedTuple):
@@ -298,10 +310,31 @@ class AdaptiveFeedback(FeedbackLaw):
         identification step just taken was about the previous sample's prior."""
         F, G = self._linearize(q_d, qd_d, u_n)
         prior = np.hstack((F, G))
-        assert self._prior_model is not None
-        self.rls.shift_model(prior - self._prior_model)
+        assert self._prior_model is not None and self._prior_input_gain is not None
+        n, p = self.n_joints, 2 * self.n_joints
+        gain = _summed_inputs(G, n)
+        delta = prior - self._prior_model
+        # Ĝ moves with its prior's change in input space, Ĝ_j ← Ĝ_j Gv⁻¹ Gv' (Gv, Gv': the
+        # old and new prior's summed velocity blocks, ≈ T D⁻¹), so Ĝ Gv⁻¹ is kept: what the arm
+        # does with a torque relative to what the model says (a payload's share) keeps its
+        # proportion, where an added deviation would not (the PUMA's Ĝ₁₁, identified at 0.1-0.2
+        # of the prior with the unknown payload, would change sign as the prior falls to 0.74
+        # of it on the move).
+        transport = np.linalg.solve(self._prior_input_gain[n:], gain[n:])
+        if self.config.project_g:
+            # Each input whose share of the new prior's diagonal would be under the floor is
+            # scaled back up to it (a column of every Ĝ_j: the input is that much stronger).
+            moved_diagonal = np.einsum("ij,ji->i", self._velocity_gain(), transport)
+            ratio = moved_diagonal / gain[n:].diagonal()
+            lift = (ratio > 0.0) & (ratio < RELATIVE_GAIN_FLOOR)
+            if any_true(lift):
+                transport = transport * np.where(lift, RELATIVE_GAIN_FLOOR / ratio, 1.0)
+        estimate = self.rls.model_view()[:, p:-1]
+        moved = np.matmul(estimate.reshape(p, -1, n), transport).reshape(p, -1)
+        np.subtract(moved, estimate, out=delta[:, p:])
+        self.rls.shift_model(delta)
         self._prior_model = prior
-        self._prior_input_gain = _summed_inputs(G, self.n_joints)
+        self._prior_input_gain = gain
 
     @property
     def prior_input_gain(self) -> np.ndarray | None:
@@ -325,7 +358,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._input_delay = float(seconds)
 
     def _g_physical(self) -> bool:
-        """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive.
+        """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive; with
+        ``relinearize`` above :data:`RELATIVE_GAIN_FLOOR` of the current set point's prior.
 
         ``(D⁻¹)_ii > 0`` for any arm. Stricter tests do worse (``bench/preset_sweep.py``,
         ``bench/long_run.py``): positive definiteness of the whole block fails from the start on
@@ -333,12 +367,20 @@ class AdaptiveFeedback(FeedbackLaw):
         are ~1e-4 of the arm's); bounds relative to ``Ĝ(0)`` destabilise the Panda; and
         explaining a refused step's residual as a jump of ``ŵ`` destabilises an hour-long run.
         """
+        diagonal = self._velocity_gain().diagonal()
+        if self._prior_model is None:
+            return bool(all_true(diagonal > 0.0))
+        assert self._prior_input_gain is not None  # relinearize: the prior is this set point's
+        floor = RELATIVE_GAIN_FLOOR * self._prior_input_gain[self.n_joints :].diagonal()
+        return bool(all_true(diagonal > floor))
+
+    def _velocity_gain(self) -> np.ndarray:
+        """Ĝ's velocity block (with lags, their sum), (n, n); a view without lags."""
         n = self.n_joints
         if self.config.input_lags:
-            diagonal = self._input_gain(velocity_rows=True).diagonal()
-        else:  # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
-            diagonal = self.rls.model_view()[n : 2 * n, 2 * n : 3 * n].diagonal()
-        return bool(all_true(diagonal > 0.0))
+            return self._input_gain(velocity_rows=True)
+        # Θᵀ = [F G w]: Ĝ's velocity block is rows n..2n, columns 2n..3n.
+        return self.rls.model_view()[n : 2 * n, 2 * n : 3 * n]
 
     def _input_gain(self, velocity_rows: bool = False) -> np.ndarray:
         """:attr:`identified_input_gain` (a fresh array) from the identifier's Θᵀ without a

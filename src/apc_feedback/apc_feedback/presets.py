@@ -62,6 +62,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "project_g": True,
         "alpha_model": 1e-3,
         "input_lags": 2,
+        "relinearize": True,
     }
 
 

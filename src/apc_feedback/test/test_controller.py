@@ -405,10 +405,10 @@ def test_recommended_law_controls_its_lagged_integral_model(controller_robot):
 
 @pytest.mark.parametrize("lags", [0, 2])
 def test_relinearize_moves_the_model_with_the_set_point(controller_robot, lags):
-    """``relinearize``: at each sample the estimate is Eq. 33 at that sample's set point plus
-    what the identifier learnt; across a gap (no identification step) that is Eq. 33 at the new
-    set point exactly, and the supervisor's prior input gain is its ``G``. Without it the model
-    stays at the first set point's."""
+    """``relinearize``: across a gap (no identification step) the model moves to the new set
+    point's Eq. 33: ``F̂`` to its ``F``, each ``Ĝ_j`` right-multiplied by the prior's change
+    in input space, so that their summed velocity block is the new prior's; the supervisor's
+    prior input gain is the new ``G``. Without it the model stays at the first set point's."""
     model = controller_robot.model
     data = model.createData()
     q, qd, q_d, qd_d, qdd_d = _random_sample()
@@ -416,23 +416,35 @@ def test_relinearize_moves_the_model_with_the_set_point(controller_robot, lags):
     later = q_d + np.array([0.6, -0.8, 0.9]), qd_d + 1.0, qdd_d
     u_later = pin.rnea(model, data, *later)
     settings = {"input_lags": lags, "input_delay": 0.004 * lags}
+
+    def eq33(q_, qd_, u_):
+        return initial_model(model, q_, qd_, u_, 0.01, delay=0.004 * lags, input_lags=lags)
+
+    F0, G0 = eq33(q_d, qd_d, u_n)
+    F1, G1 = eq33(later[0], later[1], u_later)
+    summed0, summed1 = (G.reshape(6, -1, 3).sum(axis=1) for G in (G0, G1))
     for relinearize in (True, False):
         law = AdaptiveFeedback(model, AdaptiveConfig(relinearize=relinearize, **settings))
         law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
         out = law.update(2, q, qd, *later, u_later, None)  # 1 is missing: no identification
         assert out.skipped
-        at = (later[0], later[1], u_later) if relinearize else (q_d, qd_d, u_n)
-        F, G = initial_model(model, *at, 0.01, delay=0.004 * lags if lags else 0.0, input_lags=lags)
-        np.testing.assert_allclose(law.rls.F, F, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(law.rls.G, G, rtol=0, atol=1e-12)
-        gain = G.reshape(6, -1, 3).sum(axis=1)
-        np.testing.assert_allclose(law.prior_input_gain, gain, rtol=0, atol=1e-12)
+        if not relinearize:
+            np.testing.assert_array_equal(law.rls.F, F0)
+            np.testing.assert_array_equal(law.rls.G, G0)
+            continue
+        transport = np.linalg.solve(summed0[3:], summed1[3:])
+        np.testing.assert_allclose(law.rls.F, F1, rtol=0, atol=1e-12)
+        moved = (G0.reshape(6, -1, 3) @ transport).reshape(6, -1)
+        np.testing.assert_allclose(law.rls.G, moved, rtol=0, atol=1e-12)
+        identified = law.identified_input_gain
+        np.testing.assert_allclose(identified[3:], summed1[3:], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(law.prior_input_gain, summed1, rtol=0, atol=1e-12)
 
 
 def test_relinearize_keeps_what_was_identified(controller_robot):
-    """An identification step's correction to the prior survives the prior's move: after a
-    step at the first set point and a move, the estimate minus Eq. 33 at the new set point is
-    the learnt deviation."""
+    """An identification step's correction survives the prior's move: ``F̂`` keeps its learnt
+    deviation from Eq. 33's ``F``, and ``Ĝ Gv⁻¹`` stays (``Gv``: the prior's velocity block;
+    ``Ĝ`` moves by the prior's change in input space)."""
     model = controller_robot.model
     data = model.createData()
     q, qd, q_d, qd_d, qdd_d = _random_sample()
@@ -442,11 +454,33 @@ def test_relinearize_keeps_what_was_identified(controller_robot):
     out = law.update(1, q + 0.01, qd - 0.2, q_d, qd_d, qdd_d, u_n, u_n + 3.0)
     assert out.residual is not None
     F0, G0 = initial_model(model, q_d, qd_d, u_n, 0.01)
-    learnt_F, learnt_G = law.rls.F - F0, law.rls.G - G0
-    assert np.abs(learnt_G).max() > 1e-6
+    learnt_F, G_learnt = law.rls.F - F0, law.rls.G
+    assert np.abs(G_learnt - G0).max() > 1e-6
     later = q_d + 0.3, qd_d, qdd_d
     u_later = pin.rnea(model, data, *later)
     law.update(3, q, qd, *later, u_later, None)
     F1, G1 = initial_model(model, later[0], later[1], u_later, 0.01)
     np.testing.assert_allclose(law.rls.F - F1, learnt_F, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(law.rls.G - G1, learnt_G, rtol=0, atol=1e-12)
+    # Ĝ Gv⁻¹ (Gv: the prior's velocity block) is what the move keeps.
+    share = np.linalg.solve(G0[3:].T, G_learnt.T)
+    np.testing.assert_allclose(np.linalg.solve(G1[3:].T, law.rls.G.T), share, atol=1e-9)
+
+
+def test_relinearize_keeps_the_input_gain_off_the_floor(controller_robot):
+    """With ``relinearize`` and ``project_g`` no identification step takes a diagonal entry of
+    Ĝ's velocity block from above a tenth of the prior's to below it (refused and counted);
+    without ``relinearize`` only a sign change is refused. The step: 50 N m on joint 3 that
+    moved nothing, which takes Ĝ₃₃ to 0.04 of its prior unprojected."""
+    model = controller_robot.model
+    q_d, zero = np.array([0.1, -0.5, 0.4]), np.zeros(3)
+    u_n = pin.rnea(model, model.createData(), q_d, zero, zero)
+    for relinearize, refused in ((True, True), (False, False)):
+        config = AdaptiveConfig(
+            relinearize=relinearize, project_g=True, alpha_model=10.0, alpha=1e3
+        )
+        law = AdaptiveFeedback(model, config)
+        law.update(0, q_d, zero, q_d, zero, zero, u_n, None)
+        law.update(1, q_d, zero, q_d, zero, zero, u_n, u_n + np.array([0.0, 0.0, 50.0]))
+        ratio = law.identified_input_gain[3:].diagonal() / law.prior_input_gain[3:].diagonal()
+        assert law.projected_updates == refused
+        assert ratio[2] == pytest.approx(1.0) if refused else 0.0 < ratio[2] < 0.1

@@ -170,18 +170,40 @@ def test_the_plan_covers_every_rate_arm_effect_and_law():
     cells = wall_clock.plan(
         wall_clock.ARMS, wall_clock.EFFECTS, wall_clock.RATES_HZ, tuple(wall_clock.LAWS)
     )
-    # three laws everywhere, the robot file's own law on the Panda only (its q_velocity)
-    assert len(cells) == len(set(cells)) == 4 * 2 * 2 * 3 + 4 * 2
+    # three laws everywhere; the robot file's own law adds none: both files run the preset
+    assert len(cells) == len(set(cells)) == 4 * 2 * 2 * 3
     assert {c[2] for c in cells} == {100.0, 250.0, 500.0, 1000.0}
-    assert {c[0] for c in cells if c[3] == wall_clock.ROBOT_FILE_LAW} == {"panda"}
+    assert not any(c[3] == wall_clock.ROBOT_FILE_LAW for c in cells)
 
 
-def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override():
+def test_every_robot_file_runs_the_recommended_preset_as_it_is():
+    """One preset for every arm: no robot file sets an ``adaptive.*`` value of its own."""
+    from apc_lab import robot_compare as rc
+
+    for arm in wall_clock.ARMS:
+        assert wall_clock.robot_file_overrides(arm) == {}
+        assert rc.robot_file_law(arm) == rc.LAWS["adaptive recommended"]
+
+
+def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override(
+    tmp_path, monkeypatch
+):
+    """A robot file with an ``adaptive.*`` value of its own (a user's): the benchmark's
+    ``adaptive recommended`` puts it back on the preset; the robot file's law keeps it."""
+    import yaml
+
     from apc_feedback.presets import PRESETS
+    from apc_lab import robot_compare as rc
     from apc_lab.experiment import law_parameters
+    from apc_lab.scenario import CONFIG_DIR
 
+    params = yaml.safe_load((CONFIG_DIR / rc.ROBOT_FILES["panda"]).read_text())
+    params["robot_node"]["ros__parameters"]["adaptive.q_velocity"] = 10.0
+    own = tmp_path / "panda_own.yaml"
+    own.write_text(yaml.safe_dump(params))
+    monkeypatch.setitem(rc.ROBOT_FILES, "panda", str(own))
     preset = law_parameters("adaptive", PRESETS["recommended"]())["adaptive.q_velocity"]
-    assert preset != 10.0  # the Panda file's value
+    assert preset != 10.0  # the file's own value
     args = wall_clock.controller_arguments("panda", "adaptive recommended")
     assert f"robot_node:adaptive.q_velocity:={preset!r}" in args
     assert 'robot_node:controller:="adaptive"' in args
