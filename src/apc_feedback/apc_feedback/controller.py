@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
 from apc_feedback.arrays import all_true, any_true
-from apc_feedback.linearize import initial_model
+from apc_feedback.linearize import SetpointLinearization, initial_model
 from apc_feedback.optimal import (
     OneStepControl,
     RecedingHorizonControl,
@@ -156,6 +156,11 @@ class AdaptiveFeedback(FeedbackLaw):
         self._effort_floor = -self._effort_limit
         self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
         self._data = model.createData()
+        self._setpoint_model = (
+            SetpointLinearization(model, config.period, config.initial_model, config.input_lags)
+            if config.relinearize
+            else None
+        )
         self._input_delay = config.input_delay
         self._set_weights(config)
         self.reset()
@@ -243,12 +248,15 @@ class AdaptiveFeedback(FeedbackLaw):
         starting = not self._started
         if starting:
             lags = self.config.input_lags
-            F0, G0 = self._linearize(q_d, qd_d, u_n)
+            self._prior_model = None
+            if self._setpoint_model is not None:  # relinearize: the same series every sample
+                prior = self._setpoint_model(q_d, qd_d, u_n, self._delay())
+                F0, G0 = prior[:, : 2 * self.n_joints], prior[:, 2 * self.n_joints :]
+                self._prior_model = prior
+            else:
+                F0, G0 = self._linearize(q_d, qd_d, u_n)
             self.rls.reset(F0, G0, P0=self._initial_p(G0))
             self._prior_input_gain = _summed_inputs(G0, self.n_joints)
-            self._prior_model = None
-            if self.config.relinearize:
-                self._prior_model = np.hstack((F0, G0))
             # Before the first sample the arm is taken to hold its nominal torque (δu = 0), as
             # Eq. 16's first step takes it: identification starts at sample 1 with or without lags.
             self._inputs.fill(0.0)
@@ -288,11 +296,14 @@ class AdaptiveFeedback(FeedbackLaw):
         self._k_prev = k
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
 
+    def _delay(self) -> float:
+        """The delay ``Ĝ(0)`` is split by (none without lags)."""
+        return self._input_delay if self.config.input_lags else 0.0
+
     def _linearize(
         self, q_d: np.ndarray, qd_d: np.ndarray, u_n: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 33's ``F, G`` at a set point, ``G`` split by the expected delay with lags."""
-        lags = self.config.input_lags
         return initial_model(
             self.model,
             q_d,
@@ -300,19 +311,19 @@ class AdaptiveFeedback(FeedbackLaw):
             u_n,
             self.config.period,
             self.config.initial_model,
-            delay=self._input_delay if lags else 0.0,
-            input_lags=lags,
+            delay=self._delay(),
+            input_lags=self.config.input_lags,
             data=self._data,
         )
 
     def _follow_setpoint(self, q_d: np.ndarray, qd_d: np.ndarray, u_n: np.ndarray) -> None:
         """Move the estimate with its prior to this sample's set point (``relinearize``): the
         identification step just taken was about the previous sample's prior."""
-        F, G = self._linearize(q_d, qd_d, u_n)
-        prior = np.hstack((F, G))
-        assert self._prior_model is not None and self._prior_input_gain is not None
+        assert self._setpoint_model is not None and self._prior_model is not None
+        assert self._prior_input_gain is not None
+        prior = self._setpoint_model(q_d, qd_d, u_n, self._delay())
         n, p = self.n_joints, 2 * self.n_joints
-        gain = _summed_inputs(G, n)
+        gain = _summed_inputs(prior[:, p:], n)
         delta = prior - self._prior_model
         # Ĝ moves with its prior's change in input space, Ĝ_j ← Ĝ_j Gv⁻¹ Gv' (Gv, Gv': the
         # old and new prior's summed velocity blocks, ≈ T D⁻¹), so Ĝ Gv⁻¹ is kept: what the arm

@@ -176,6 +176,78 @@ def split_input_matrix(
     return out
 
 
+class SetpointLinearization:
+    """``[F G₀ … G_L]`` of :func:`initial_model` at set point after set point, for a law that
+    re-linearises every sample (``relinearize``): the same series, the workspace made once, the
+    powers of ``A`` shared by ``F`` and the split, and no argument checks (the law's set points
+    are checked where they enter it). Equal to :func:`initial_model` to rounding.
+
+    Parameters
+    ----------
+    model : pinocchio.Model
+        The controller's model.
+    period : float
+        Sampling period T (s).
+    form : {"corrected", "printed"}
+        Eq. 33b's series, as in :func:`discretize_series`.
+    input_lags : int
+        Input matrices after ``G₀`` (0: Eq. 33's ``F, G``).
+    """
+
+    def __init__(
+        self, model: pin.Model, period: float, form: SeriesForm = "corrected", input_lags: int = 0
+    ) -> None:
+        if not period > 0.0:
+            raise LinearizeError(f"period must be > 0, got {period}")
+        if form not in ("corrected", "printed"):
+            raise LinearizeError(f"form must be 'corrected' or 'printed', got {form!r}")
+        n = model.nv
+        self.model, self.data = model, model.createData()
+        self.period, self.input_lags, self._n = float(period), int(input_lags), n
+        # Γ(s) = B s + A B s² c₂ + A² B s³ c₃ (Eq. 33b's series, corrected or printed).
+        self._c2, self._c3 = (0.5, 1.0 / 6.0) if form == "corrected" else (1.0, 0.5)
+        self._A = np.zeros((2 * n, 2 * n))
+        self._A[:n, n:] = np.eye(n)
+        self._B = np.zeros((2 * n, n))
+        self._eye = np.eye(2 * n)
+
+    def __call__(
+        self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, delay: float = 0.0
+    ) -> np.ndarray:
+        """``[F G₀ … G_L]`` (a fresh array, shape (2n, 2n + (L+1) n)) at ``(q, qd, tau)``, the
+        input split by ``delay`` (s) as :func:`split_input_matrix` splits it."""
+        n, T, lags = self._n, self.period, self.input_lags
+        A, B = self._A, self._B
+        ddq_dq, ddq_dv, minv = pin.computeABADerivatives(self.model, self.data, q, qd, tau)
+        A[n:, :n] = ddq_dq
+        A[n:, n:] = ddq_dv
+        np.add(minv, minv.T, out=B[n:])
+        B[n:] *= 0.5
+        A2 = A @ A
+        AB = A @ B
+        A2B = A @ AB
+        p = 2 * n
+        out = np.zeros((p, p + (lags + 1) * n))
+        np.add(self._eye, A * T, out=out[:, :p])
+        out[:, :p] += A2 * (T * T / 2.0)
+
+        def gamma(s: float) -> np.ndarray:
+            return B * s + AB * (s * s * self._c2) + A2B * (s * s * s * self._c3)
+
+        G = gamma(T)
+        delay = min(float(delay), lags * T)
+        d = min(int(delay // T), lags)
+        f = delay - d * T
+        inputs = out[:, p:]
+        if d == lags or f <= 0.0:
+            inputs[:, d * n : (d + 1) * n] = G
+            return out
+        G_d = gamma(T - f)
+        inputs[:, d * n : (d + 1) * n] = G_d
+        np.subtract(G, G_d, out=inputs[:, (d + 1) * n : (d + 2) * n])
+        return out
+
+
 def discretize_exact(A: np.ndarray, B: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation (Eqs. 19-20 with constant A, B).
 

@@ -14,7 +14,7 @@ from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
-from apc_feedback.linearize import initial_model
+from apc_feedback.linearize import SetpointLinearization, initial_model
 from apc_feedback.optimal import one_step_control, receding_horizon_control
 
 rng = np.random.default_rng(7)
@@ -484,3 +484,17 @@ def test_relinearize_keeps_the_input_gain_off_the_floor(controller_robot):
         ratio = law.identified_input_gain[3:].diagonal() / law.prior_input_gain[3:].diagonal()
         assert law.projected_updates == refused
         assert ratio[2] == pytest.approx(1.0) if refused else 0.0 < ratio[2] < 0.1
+
+
+@pytest.mark.parametrize(("lags", "delay"), [(0, 0.0), (2, 0.004), (2, 0.013), (2, 0.03)])
+@pytest.mark.parametrize("form", ["corrected", "printed"])
+def test_setpoint_linearization_is_initial_model(controller_robot, lags, delay, form):
+    """The per-sample linearisation ``relinearize`` uses gives :func:`initial_model`'s
+    ``[F G₀ … G_L]`` (to rounding) at every set point, whatever the delay's split."""
+    model = controller_robot.model
+    linearize = SetpointLinearization(model, 0.01, form, lags)
+    for _ in range(3):
+        q, qd, _, _, qdd = _random_sample()
+        tau = pin.rnea(model, model.createData(), q, qd, qdd)
+        F, G = initial_model(model, q, qd, tau, 0.01, form, delay=delay, input_lags=lags)
+        np.testing.assert_allclose(linearize(q, qd, tau, delay), np.hstack((F, G)), atol=1e-12)
