@@ -99,8 +99,8 @@ class AdaptiveConfig:
         within a move (the Panda's joints 1 and 3 line up as joint 2 crosses 0) otherwise
         outruns the identifier and the law over-corrects. ``Ĝ`` moves with its prior in input
         space (a relative error, such as a payload's, keeps its proportion), ``project_g``
-        keeps its velocity block's diagonal above a tenth of the prior's (refusing steps, and
-        scaling an input's column up where the move would take it under), and the supervisor's
+        refuses steps that would leave its velocity block's diagonal under a tenth of the
+        prior's, and the supervisor's
         input-gain region is taken around the current set point's prior. False (default): the
         paper's prior, Eq. 33 at the first nominal point only.
     identify_min_speed : float

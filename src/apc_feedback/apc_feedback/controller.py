@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
-from apc_feedback.arrays import all_true, any_true
+from apc_feedback.arrays import all_true
 from apc_feedback.linearize import SetpointLinearization, initial_model
 from apc_feedback.optimal import (
     OneStepControl,
@@ -31,16 +31,19 @@ from apc_feedback.optimal import (
 )
 from apc_feedback.rls import Rls, RlsError
 
-#: With ``relinearize``, ``project_g`` keeps each diagonal entry of Ĝ's velocity block above
-#: this fraction of the current set point's prior (Eq. 33 there): it refuses identification
-#: steps that would leave one under it, and where the move to a new set point would, it scales
-#: that input's column up to it. An arm ten times heavier about a joint than its model is
-#: beyond any payload the prior leaves to the identifier. In
-#: closed loop a disturbance the law cancels (an unknown payload's torques along a move) makes
-#: the data say the torque does nothing, and the PUMA's Ĝ₁₁ drifts from 0.7 of the prior
-#: (the payload's true share) to 0 and below. Without ``relinearize`` the prior is the first set
-#: point's, from which the Panda's true gain moves 0.19-6.9 times on a move: no relative bound
-#: there, only the sign.
+#: With ``relinearize``, ``project_g`` refuses an identification step that would leave a
+#: diagonal entry of Ĝ's velocity block under this fraction of the current set point's prior
+#: (Eq. 33 there) lower than it was: an arm ten times heavier about a joint than its model is
+#: beyond any payload the prior leaves to the identifier. An entry the move to a new set point
+#: took a little under may climb back; one under half of it (put there from outside: a
+#: corrupted estimate) may move freely, so that the identifier can repair it. Scaling the
+#: input's column back up instead, after a step or a move, kept the identification going but
+#: let the off-diagonal entries grow until Ĝ pushed a direction the wrong way. In closed loop a
+#: disturbance the law cancels (an unknown payload's torques along a move) makes the data say
+#: the torque does nothing, and the PUMA's Ĝ₁₁ drifts from 0.7 of the prior (the payload's
+#: true share) to 0 and below. Without ``relinearize`` the prior is the first set point's, from
+#: which the Panda's true gain moves 0.19-6.9 times on a move: no relative bound there, only
+#: the sign.
 RELATIVE_GAIN_FLOOR = 0.1
 
 
@@ -274,9 +277,14 @@ class AdaptiveFeedback(FeedbackLaw):
             self.skipped_updates += 1
         else:
             try:
+                before = (
+                    self._velocity_gain().diagonal().copy()
+                    if self._prior_model is not None
+                    else None
+                )
                 step = self.rls.update(self._z, dx)
                 residual, trace_p = step.residual, step.trace_p
-                if self.config.project_g and not self._g_physical():
+                if self.config.project_g and not self._g_physical(before):
                     # Unphysical Ĝ: take the step back, keep the last physical estimate.
                     self.rls.undo()
                     self.projected_updates += 1
@@ -332,14 +340,6 @@ class AdaptiveFeedback(FeedbackLaw):
         # of the prior with the unknown payload, would change sign as the prior falls to 0.74
         # of it on the move).
         transport = np.linalg.solve(self._prior_input_gain[n:], gain[n:])
-        if self.config.project_g:
-            # Each input whose share of the new prior's diagonal would be under the floor is
-            # scaled back up to it (a column of every Ĝ_j: the input is that much stronger).
-            moved_diagonal = np.einsum("ij,ji->i", self._velocity_gain(), transport)
-            ratio = moved_diagonal / gain[n:].diagonal()
-            lift = (ratio > 0.0) & (ratio < RELATIVE_GAIN_FLOOR)
-            if any_true(lift):
-                transport = transport * np.where(lift, RELATIVE_GAIN_FLOOR / ratio, 1.0)
         estimate = self.rls.model_view()[:, p:-1]
         moved = np.matmul(estimate.reshape(p, -1, n), transport).reshape(p, -1)
         np.subtract(moved, estimate, out=delta[:, p:])
@@ -368,9 +368,11 @@ class AdaptiveFeedback(FeedbackLaw):
             raise FeedbackError(f"input delay must be finite and >= 0 s, got {seconds}")
         self._input_delay = float(seconds)
 
-    def _g_physical(self) -> bool:
+    def _g_physical(self, before: np.ndarray | None = None) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive; with
-        ``relinearize`` above :data:`RELATIVE_GAIN_FLOOR` of the current set point's prior.
+        ``relinearize`` (``before``: the diagonal before the step) no entry ends under
+        :data:`RELATIVE_GAIN_FLOOR` of the current set point's prior lower than it was, unless
+        it was under half the floor already (put there from outside, it may move freely).
 
         ``(D⁻¹)_ii > 0`` for any arm. Stricter tests do worse (``bench/preset_sweep.py``,
         ``bench/long_run.py``): positive definiteness of the whole block fails from the start on
@@ -379,11 +381,13 @@ class AdaptiveFeedback(FeedbackLaw):
         explaining a refused step's residual as a jump of ``ŵ`` destabilises an hour-long run.
         """
         diagonal = self._velocity_gain().diagonal()
-        if self._prior_model is None:
-            return bool(all_true(diagonal > 0.0))
+        if not all_true(diagonal > 0.0):
+            return False
+        if before is None:
+            return True
         assert self._prior_input_gain is not None  # relinearize: the prior is this set point's
         floor = RELATIVE_GAIN_FLOOR * self._prior_input_gain[self.n_joints :].diagonal()
-        return bool(all_true(diagonal > floor))
+        return bool(all_true((diagonal > floor) | (diagonal >= before) | (before <= 0.5 * floor)))
 
     def _velocity_gain(self) -> np.ndarray:
         """Ĝ's velocity block (with lags, their sum), (n, n); a view without lags."""
