@@ -45,6 +45,11 @@ from apc_feedback.rls import Rls, RlsError
 #: which the Panda's true gain moves 0.19-6.9 times on a move: no relative bound there, only
 #: the sign.
 RELATIVE_GAIN_FLOOR = 0.1
+#: With ``relinearize``, Eq. 33 is taken again at most this often (s of samples): an arm's
+#: inertia changes on the time scale of a move, and at T = 1 ms taking it every sample cost the
+#: 1 kHz robot path a third more late commands (``bench/robot_loop.py``) for a prior that moves
+#: by a hundredth of a move's change.
+RELINEARIZE_PERIOD_S = 0.01
 
 
 class FeedbackOutput(NamedTuple):
@@ -164,6 +169,9 @@ class AdaptiveFeedback(FeedbackLaw):
             if config.relinearize
             else None
         )
+        # The prior moves every RELINEARIZE_PERIOD_S of samples (each sample at T >= 10 ms).
+        self._relinearize_every = max(1, round(RELINEARIZE_PERIOD_S / config.period))
+        self._next_relinearize = 0
         self._input_delay = config.input_delay
         self._set_weights(config)
         self.reset()
@@ -256,6 +264,7 @@ class AdaptiveFeedback(FeedbackLaw):
                 prior = self._setpoint_model(q_d, qd_d, u_n, self._delay())
                 F0, G0 = prior[:, : 2 * self.n_joints], prior[:, 2 * self.n_joints :]
                 self._prior_model = prior
+                self._next_relinearize = k + self._relinearize_every
             else:
                 F0, G0 = self._linearize(q_d, qd_d, u_n)
             self.rls.reset(F0, G0, P0=self._initial_p(G0))
@@ -293,8 +302,9 @@ class AdaptiveFeedback(FeedbackLaw):
                 # Keep controlling with the last good estimate; the node counts and reports it.
                 rejected = True
                 self.rejected_updates += 1
-        if self._prior_model is not None and not starting:
+        if self._prior_model is not None and not starting and k >= self._next_relinearize:
             self._follow_setpoint(q_d, qd_d, u_n)
+            self._next_relinearize = k + self._relinearize_every
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
         du = self._control(dx)
