@@ -15,8 +15,8 @@ for the arm (``effects: puma560`` / ``panda``: friction, rotor inertia, encoder 
 the drive's differenced velocity, a one-driver-period command delay); the 3-joint PUMA 560 and
 the Franka Panda, each carrying robot_compare's case-(c) payload (5 lb; at the PUMA's wrist
 centre) that the controllers do not know; the laws computed torque, the JTC-style PID and the
-adaptive law with the recommended preset as the robot file ships it, minus the file's per-arm
-``adaptive.*`` overrides (the Panda's ``q_velocity: 10``: the preset itself runs). The robot
+adaptive law with the recommended preset as the robot file ships it, minus any per-arm
+``adaptive.*`` override a robot file carries (the shipped ones carry none). The robot
 file's ``path_tolerance`` is opened (0: no check) for every law, so that every run finishes
 and the loss rule below is the benchmark's, not the node's abort.
 

@@ -361,7 +361,7 @@ class AdaptiveFeedback(FeedbackLaw):
     def prior_input_gain(self) -> np.ndarray | None:
         """Eq. 33's ``G(0)`` at the first sample since the last :meth:`reset` (the effect of a
         perturbation held over one period), shape (2n, n); with ``relinearize`` Eq. 33's ``G``
-        at the latest sample's set point; None before the first sample."""
+        at the set point the prior last moved to; None before the first sample."""
         return self._prior_input_gain
 
     @property
