@@ -288,7 +288,7 @@ class AdaptiveFeedback(FeedbackLaw):
             try:
                 before = (
                     self._velocity_gain().diagonal().copy()
-                    if self._prior_model is not None
+                    if self.config.project_g and self._prior_model is not None
                     else None
                 )
                 step = self.rls.update(self._z, dx)

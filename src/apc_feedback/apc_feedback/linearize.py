@@ -32,6 +32,7 @@ same truncated series as Eq. 33b (``Γ(s) = B s + A B s^2/2 + A^2 B s^3/6``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -160,20 +161,35 @@ def split_input_matrix(
         raise LinearizeError(f"delay must be finite and >= 0 s, got {delay}")
     if isinstance(input_lags, bool) or not isinstance(input_lags, int) or input_lags < 0:
         raise LinearizeError(f"input_lags must be an int >= 0, got {input_lags!r}")
+    B = np.asarray(B, dtype=float)
+    p, n = B.shape
+    out = np.zeros((p, (input_lags + 1) * n))
+    _split_into(out, lambda s: input_series(A, B, s, form), period, delay, input_lags, n)
+    return out
+
+
+def _split_into(
+    inputs: np.ndarray,
+    gamma: Callable[[float], np.ndarray],
+    period: float,
+    delay: float,
+    input_lags: int,
+    n: int,
+) -> None:
+    """Write ``[G_0 … G_L]`` of an input applied ``delay`` s after its sample into the zeroed
+    ``inputs`` (p, (L+1) n), ``gamma(s)`` being ``Γ(s)``: all of ``Γ(T)`` at the delay's lag,
+    or ``Γ(T - f)`` there and the rest at the next (the module docstring)."""
     T = float(period)
     delay = min(float(delay), input_lags * T)
     d = min(int(delay // T), input_lags)
     f = delay - d * T
-    G = input_series(A, B, T, form)
-    p, n = G.shape
-    out = np.zeros((p, (input_lags + 1) * n))
+    G = gamma(T)
     if d == input_lags or f <= 0.0:
-        out[:, d * n : (d + 1) * n] = G
-        return out
-    G_d = input_series(A, B, T - f, form)
-    out[:, d * n : (d + 1) * n] = G_d
-    out[:, (d + 1) * n : (d + 2) * n] = G - G_d
-    return out
+        inputs[:, d * n : (d + 1) * n] = G
+        return
+    G_d = gamma(T - f)
+    inputs[:, d * n : (d + 1) * n] = G_d
+    np.subtract(G, G_d, out=inputs[:, (d + 1) * n : (d + 2) * n])
 
 
 class SetpointLinearization:
@@ -234,17 +250,7 @@ class SetpointLinearization:
         def gamma(s: float) -> np.ndarray:
             return B * s + AB * (s * s * self._c2) + A2B * (s * s * s * self._c3)
 
-        G = gamma(T)
-        delay = min(float(delay), lags * T)
-        d = min(int(delay // T), lags)
-        f = delay - d * T
-        inputs = out[:, p:]
-        if d == lags or f <= 0.0:
-            inputs[:, d * n : (d + 1) * n] = G
-            return out
-        G_d = gamma(T - f)
-        inputs[:, d * n : (d + 1) * n] = G_d
-        np.subtract(G, G_d, out=inputs[:, (d + 1) * n : (d + 2) * n])
+        _split_into(out[:, p:], gamma, T, delay, lags, n)
         return out
 
 
