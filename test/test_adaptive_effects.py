@@ -82,7 +82,7 @@ def test_a_stuck_joint_skips_identification():
 
 def test_bad_options_are_named():
     with pytest.raises(FeedbackError, match="input_lags"):
-        AdaptiveConfig(input_lags=3)
+        AdaptiveConfig(input_lags=4)
     with pytest.raises(FeedbackError, match="input_delay"):
         AdaptiveConfig(input_delay=-0.001)
     with pytest.raises(FeedbackError, match="identify_min_speed"):

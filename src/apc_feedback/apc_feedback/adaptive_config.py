@@ -20,6 +20,10 @@ class FeedbackError(SettingError):
     """Bad feedback configuration or input; ``field`` names a bad setting."""
 
 
+#: The most delayed inputs a model carries (``input_lags``; robot mode's timing may ask for them).
+MAX_INPUT_LAGS = 3
+
+
 @dataclass(frozen=True)
 class AdaptiveConfig:
     """Settings of the adaptive perturbation controller (paper values by default).
@@ -71,13 +75,17 @@ class AdaptiveConfig:
         possible models. Without it a sudden load (a payload picked up) lets one
         large-residual step flip the sign of ``Ĝ`` and the law pushes the wrong way at full
         torque (docs/paper.md, the pickup run). Off in the paper.
-    input_lags : {0, 1, 2}
+    input_lags : {0, 1, 2, 3}
         Delayed inputs the identified model carries: ``δx(k+1) = F δx(k) + G₀ δu(k) + G₁
         δu(k-1) + … + G_L δu(k-L) + w``, the exact zero-order-hold model of an input applied
         up to ``L`` periods after its sample (a driver that writes a command at its next cycle,
         a drive that adds a cycle, a velocity differenced over a period). All ``G_j`` are
         identified; ``Ĝ(0)`` is Eq. 33's ``G`` split by ``input_delay``
-        (:func:`apc_feedback.linearize.split_input_matrix`); the control plans over
+        (:func:`apc_feedback.linearize.split_input_matrix`), and in robot mode with a driver
+        that sends no velocity the model of a sample whose velocity is estimated from positions
+        (:func:`apc_feedback.linearize.sampled_coordinates`); where that timing needs more lags
+        (on a 100 Hz driver the estimate spans two periods and the command acts one period late:
+        three) the model carries more, up to :data:`MAX_INPUT_LAGS`; the control plans over
         ``(δx(k), δu(k-1), …, δu(k-L))`` with ``horizon + L`` steps. 0 (default): Eq. 16.
     input_delay : float
         The delay (s) from a sample to the arm applying its command that ``Ĝ(0)`` is split by
@@ -175,9 +183,9 @@ class AdaptiveConfig:
     )
     input_lags: int = setting(
         0,
-        "delayed inputs the identified model carries (G_1 du(k-1), G_2 du(k-2)); 0 = Eq. 16",
+        "delayed inputs the identified model carries (G_1 du(k-1) ... G_L du(k-L)); 0 = Eq. 16",
         0,
-        2,
+        MAX_INPUT_LAGS,
     )
     input_delay: float = setting(
         0.0, "delay (s) from a sample to its command's application that splits G(0)", 0.0, 1.0

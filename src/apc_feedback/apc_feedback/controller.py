@@ -14,8 +14,10 @@ told the sample index, never a clock.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -23,7 +25,12 @@ import pinocchio as pin
 
 from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
 from apc_feedback.arrays import all_true
-from apc_feedback.linearize import SetpointLinearization, initial_model
+from apc_feedback.input_timing import InputTiming
+from apc_feedback.linearize import (
+    SetpointLinearization,
+    VelocityStencil,
+    initial_model,
+)
 from apc_feedback.optimal import (
     OneStepControl,
     RecedingHorizonControl,
@@ -162,19 +169,26 @@ class AdaptiveFeedback(FeedbackLaw):
         limit = np.asarray(model.effortLimit, dtype=float)
         self._effort_limit = np.where((limit > 0.0) & np.isfinite(limit), limit, np.inf)
         self._effort_floor = -self._effort_limit
-        self.rls = Rls(model.nv, config.rls_config(model.nv), config.input_lags)
         self._data = model.createData()
-        self._setpoint_model = (
-            SetpointLinearization(model, config.period, config.initial_model, config.input_lags)
-            if config.relinearize
-            else None
-        )
+        self._configured_lags = config.input_lags
+        self._build_identifier(config)
         # The prior moves every RELINEARIZE_PERIOD_S of samples (each sample at T >= 10 ms).
         self._relinearize_every = max(1, round(RELINEARIZE_PERIOD_S / config.period))
         self._next_relinearize = 0
-        self._input_delay = config.input_delay
+        self.input_timing = InputTiming(config.input_delay)
         self._set_weights(config)
         self.reset()
+
+    def _build_identifier(self, config: AdaptiveConfig) -> None:
+        """The identifier and the prior's linearisation for ``config.input_lags``."""
+        self.rls = Rls(self.n_joints, config.rls_config(self.n_joints), config.input_lags)
+        self._setpoint_model = (
+            SetpointLinearization(
+                self.model, config.period, config.initial_model, config.input_lags
+            )
+            if config.relinearize
+            else None
+        )
 
     def _set_weights(self, config: AdaptiveConfig) -> None:
         """Everything derived from the config's weights and forms (not identifier state)."""
@@ -201,10 +215,10 @@ class AdaptiveFeedback(FeedbackLaw):
             ``config`` changes a setting of the identifier (rho, alpha, forgetting,
             trace_max).
         """
-        if (
-            config.rls_config(self.n_joints) != self.config.rls_config(self.n_joints)
-            or config.input_lags != self.config.input_lags
-        ):
+        if config.input_lags != self._configured_lags:
+            raise FeedbackError("the identifier's settings cannot change while it runs")
+        config = dataclasses.replace(config, input_lags=self.config.input_lags)  # as sized
+        if config.rls_config(self.n_joints) != self.config.rls_config(self.n_joints):
             raise FeedbackError("the identifier's settings cannot change while it runs")
         self._set_weights(config)
 
@@ -258,13 +272,24 @@ class AdaptiveFeedback(FeedbackLaw):
         trace_p = float("nan")
         starting = not self._started
         if starting:
-            lags = self.config.input_lags
+            if self.config.relinearize and self.config.input_lags:
+                self.input_timing.choose()
+            lags = self.input_timing.lags(self._configured_lags, self.config.period)
+            if lags != self.config.input_lags:  # the driver's timing needs another model size
+                config = dataclasses.replace(self.config, input_lags=lags)
+                self._build_identifier(config)
+                self._set_weights(config)
+                self.reset()
             self._prior_model = None
             if self._setpoint_model is not None:  # relinearize: the same series every sample
-                prior = self._setpoint_model(q_d, qd_d, u_n, self._delay())
+                prior = self._setpoint_model(
+                    q_d, qd_d, u_n, self._delay(), self.input_timing.stencil
+                )
                 F0, G0 = prior[:, : 2 * self.n_joints], prior[:, 2 * self.n_joints :]
                 self._prior_model = prior
                 self._next_relinearize = k + self._relinearize_every
+                models = self.input_timing.candidates(prior, self._setpoint_model.with_delay)
+                self.input_timing.choice.start(self.input_timing.delay, models)
             else:
                 F0, G0 = self._linearize(q_d, qd_d, u_n)
             self.rls.reset(F0, G0, P0=self._initial_p(G0))
@@ -291,6 +316,8 @@ class AdaptiveFeedback(FeedbackLaw):
                     if self.config.project_g and self._prior_model is not None
                     else None
                 )
+                if self.input_timing.choice.active:
+                    self.input_timing.choice.score(dx, self._z[:-1], self.n_joints)
                 step = self.rls.update(self._z, dx)
                 residual, trace_p = step.residual, step.trace_p
                 if self.config.project_g and not self._g_physical(before):
@@ -316,7 +343,7 @@ class AdaptiveFeedback(FeedbackLaw):
 
     def _delay(self) -> float:
         """The delay ``Ĝ(0)`` is split by (none without lags)."""
-        return self._input_delay if self.config.input_lags else 0.0
+        return self.input_timing.delay if self.config.input_lags else 0.0
 
     def _linearize(
         self, q_d: np.ndarray, qd_d: np.ndarray, u_n: np.ndarray
@@ -331,6 +358,7 @@ class AdaptiveFeedback(FeedbackLaw):
             self.config.initial_model,
             delay=self._delay(),
             input_lags=self.config.input_lags,
+            stencil=self.input_timing.stencil,
             data=self._data,
         )
 
@@ -339,7 +367,10 @@ class AdaptiveFeedback(FeedbackLaw):
         identification step just taken was about the previous sample's prior."""
         assert self._setpoint_model is not None and self._prior_model is not None
         assert self._prior_input_gain is not None
-        prior = self._setpoint_model(q_d, qd_d, u_n, self._delay())
+        prior = self._setpoint_model(q_d, qd_d, u_n, self._delay(), self.input_timing.stencil)
+        self.input_timing.choice.moved(
+            self.input_timing.candidates(prior, self._setpoint_model.with_delay)
+        )
         n, p = self.n_joints, 2 * self.n_joints
         gain = _summed_inputs(prior[:, p:], n)
         delta = prior - self._prior_model
@@ -370,13 +401,21 @@ class AdaptiveFeedback(FeedbackLaw):
         of ``Ĝ₀ … Ĝ_L``), shape (2n, n): what :attr:`prior_input_gain` started it from."""
         return self._input_gain()
 
-    def expect_input_delay(self, seconds: float) -> None:
+    def expect_input_delay(self, seconds: float, candidates: Sequence[float] = ()) -> None:
         """Split ``Ĝ(0)`` by this delay (s) at the next (re)start instead of
         ``config.input_delay``: robot mode's measured delay from a sample to the arm applying
-        its command. No effect on a model without lags."""
-        if not (math.isfinite(seconds) and seconds >= 0.0):
-            raise FeedbackError(f"input delay must be finite and >= 0 s, got {seconds}")
-        self._input_delay = float(seconds)
+        its command. No effect on a model without lags. ``candidates``: other delays the arm
+        may have (a drive that adds a cycle); with ``relinearize`` each sample scores how well
+        each one's prior predicts the arm, and a restart (a hand-back) takes the one that
+        predicts clearly best (:class:`apc_feedback.input_timing.DelayChoice`)."""
+        self.input_timing.expect_delay(seconds, candidates)
+
+    def expect_velocity_stencil(self, stencil: VelocityStencil | None) -> None:
+        """From the next (re)start, the samples' velocity is ``stencil`` of past positions
+        (robot mode's estimate for a driver that sends none; None: a measured velocity): the
+        prior is the model of such a sample (:func:`apc_feedback.linearize.sampled_coordinates`),
+        whose inputs act over the stencil's span as well. No effect on a model without lags."""
+        self.input_timing.expect_stencil(stencil)
 
     def _g_physical(self, before: np.ndarray | None = None) -> bool:
         """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive; with

@@ -28,12 +28,29 @@ Dynamic Systems*, 3rd ed., Addison-Wesley 1998, sec. 4.3.4). With ``τ = d T + f
 
 so the input matrices sum to Eq. 33's ``G``. :func:`split_input_matrix` gives them with the
 same truncated series as Eq. 33b (``Γ(s) = B s + A B s^2/2 + A^2 B s^3/6``).
+
+A velocity estimated from positions. Eq. 16's state is the arm's ``(q, q')``; robot mode, when
+the driver sends no velocity, samples ``(q, v̂)`` with ``v̂(k) = Σ_i w_i q(kT - s_i)`` (a
+:class:`VelocityStencil`: the parabola through the last three states). ``v̂`` lags ``q'`` by what
+the inputs did over the stencil's span: ``y(k) = (q(k), v̂(k)) = M x(k) + Σ_j N_j u(k-j)``, with
+``M = [[I, 0], [Σ_i w_i C Φ(-s_i)]]`` (``C = [I 0]``, ``Φ(s) = exp(A s)``) and ``N_j`` the
+inputs' share of the positions at ``kT - s_i``. The exact model of ``y`` is then
+
+    y(k+1) = F_y y(k) + Σ_j G_y,j u(k-j),   F_y = M F M^-1,   G_y,j = M G_j - F_y N_j + N_(j+1),
+
+(:func:`sampled_coordinates`; ``Φ`` and ``Γ`` by Eq. 33's series). On a 100 Hz driver at
+``T = 10 ms`` the parabola spans two periods and the command acts one period late: for a
+double integrator ``G_y = [0, (T²/2, 3T/4), (T²/4, T/2), (-T²/4, -T/4)] D^-1`` against
+Eq. 33's ``[0, (T²/2, T), 0, 0] D^-1``; the matrices sum to Eq. 33's ``G`` there (to a few
+per mille on an arm, whose own dynamics act over the stencil's span).
 """
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Callable
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -192,6 +209,151 @@ def _split_into(
     np.subtract(G, G_d, out=inputs[:, (d + 1) * n : (d + 2) * n])
 
 
+class VelocityStencil(NamedTuple):
+    """A sampled velocity made of positions: ``v̂(k) = Σ_i weights[i] q(kT - offsets[i])``
+    (offsets in s, >= 0; weights in 1/s, summing to 0)."""
+
+    offsets: tuple[float, ...]
+    weights: tuple[float, ...]
+
+
+def stencil_lags(stencil: VelocityStencil | None, period: float, delay: float) -> int:
+    """The input lags the exact model of a sample needs: the inputs that acted over the
+    stencil's span or are still on their way, ``ceil((delay + span) / T)``."""
+    span = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
+    return math.ceil((delay + span) / period - 1e-9)
+
+
+#: ``c₂, c₃`` of Eq. 33b's series ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` in each form.
+_SERIES_COEFFICIENTS: dict[str, tuple[float, float]] = {
+    "corrected": (0.5, 1.0 / 6.0),
+    "printed": (1.0, 0.5),
+}
+
+
+class _Series:
+    """``Φ(s) = I + A s + A² s²/2`` and ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` (Eq. 33's series,
+    ``c₂, c₃``: its corrected or printed form), for ``s`` of either sign."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, c2: float, c3: float) -> None:
+        self.A, self.B, self.A2 = A, B, A @ A
+        self.AB = A @ B
+        self.A2B = A @ self.AB
+        self.c2, self.c3 = c2, c3
+        self.eye = np.eye(A.shape[0])
+
+    def phi(self, s: float) -> np.ndarray:
+        return self.eye + self.A * s + self.A2 * (s * s / 2.0)
+
+    def gamma(self, s: float) -> np.ndarray:
+        return self.B * s + self.AB * (s * s * self.c2) + self.A2B * (s * s * s * self.c3)
+
+
+def sampled_coordinates(
+    model: np.ndarray,
+    series: _Series,
+    period: float,
+    delay: float,
+    stencil: VelocityStencil,
+    input_lags: int,
+) -> None:
+    """Express ``model = [F G₀ … G_L]`` (2n rows; ``G`` split by ``delay``) in place in the
+    coordinates of a sample whose velocity is ``stencil`` of positions (the module docstring).
+
+    The exact model may need more lags than ``input_lags`` (:func:`stencil_lags`); those beyond
+    are added to ``G_L``, so that the matrices' sum, the effect of a held input, is kept.
+    """
+    p = model.shape[0]
+    sampled = _SampledCoordinates(series, model[:, :p], stencil)
+    model[:, :p] = sampled.F
+    sampled.inputs(model[:, p:], period, delay, input_lags)
+
+
+#: Powers of ``A`` in a piece of :func:`_piece_coefficients`: ``C A^m B``, m = 0 … 6.
+_PIECE_POWERS = 7
+
+
+@functools.lru_cache(maxsize=64)
+def _piece_coefficients(
+    stencil: VelocityStencil, period: float, delay: float, lags: int, c2: float, c3: float
+) -> np.ndarray:
+    """``K`` (lags + 2, 7) with ``Nv_j = Σ_m K[j, m] C A^m B``: the inputs' share of ``v̂``.
+
+    ``x(kT - s) = Φ(-s) (x(k) - Σ pieces Φ(-b) Γ(b - a) u(k-j))``, ``u(k-j)`` acting over
+    ``[a, b]`` within ``[-s, 0]``; with Eq. 33's series ``C Φ(-s) = C (I - A s + A² s²/2)``,
+    ``Φ(-b) = I - A b + A² b²/2``, ``Γ(L) = B L + A B L² c₂ + A² B L³ c₃``, each piece is a
+    polynomial in ``A`` whose scalar coefficients depend only on the timing: made once per
+    timing, the per-sample work is the powers ``C A^m B``.
+    """
+    T = period
+    K = np.zeros((lags + 2, _PIECE_POWERS))
+    for s, w in zip(stencil.offsets, stencil.weights, strict=True):
+        back = (w, -w * s, w * s * s / 2.0)
+        for j in range(1, lags + 2):
+            a, b = max(-s, -j * T + delay), min(0.0, (1 - j) * T + delay)
+            if b <= a:
+                continue
+            L = b - a
+            phi = (1.0, -b, b * b / 2.0)
+            gamma = (L, L * L * c2, L * L * L * c3)
+            for alpha, x in enumerate(back):
+                for beta, y in enumerate(phi):
+                    for power, z in enumerate(gamma):
+                        K[j, alpha + beta + power] -= x * y * z
+    K.setflags(write=False)
+    return K
+
+
+class _SampledCoordinates:
+    """The parts of :func:`sampled_coordinates` that do not depend on the delay (``M``,
+    ``F_y = M F M⁻¹``, ``w_i C Φ(-s_i)``), and the input matrices for a delay
+    (:meth:`inputs`), batched over the stencil's pieces."""
+
+    def __init__(self, series: _Series, F: np.ndarray, stencil: VelocityStencil) -> None:
+        p = F.shape[0]
+        n = p // 2
+        self.series, self.stencil, self.n = series, stencil, n
+        offsets = np.asarray(stencil.offsets, dtype=float)
+        weights = np.asarray(stencil.weights, dtype=float)
+        # w_i C Φ(-s_i), C = [I 0]: C Φ(t) = C + (C A) t + (C A²) t²/2.
+        C = np.zeros((n, p))
+        C[:, :n] = np.eye(n)
+        self.backs = weights[:, None, None] * (
+            C
+            - series.A[:n] * offsets[:, None, None]
+            + series.A2[:n] * (offsets * offsets / 2.0)[:, None, None]
+        )
+        M = np.eye(p)
+        M[n:] = self.backs.sum(axis=0)  # v̂ = V x(k) + …
+        # C A^m B, m = 0 … 6: the inputs' share of v̂ for any delay (:meth:`inputs`).
+        self._powers = np.empty((_PIECE_POWERS, n * n))
+        AmB = series.B
+        for m in range(_PIECE_POWERS):
+            self._powers[m] = AmB[:n].ravel()
+            if m + 1 < _PIECE_POWERS:
+                AmB = series.A @ AmB
+        self.M = M
+        self.F = np.linalg.solve(M.T, (M @ F).T).T  # M F M⁻¹, solved
+
+    def inputs(self, out: np.ndarray, period: float, delay: float, input_lags: int) -> None:
+        """Write ``[G_y,0 … G_y,L]`` of ``delay`` into ``out`` (p, (L+1) n)."""
+        series, n, T = self.series, self.n, float(period)
+        p = 2 * n
+        lags = max(input_lags, stencil_lags(self.stencil, T, delay))
+        steps = np.zeros((p, (lags + 2) * n))
+        _split_into(steps, series.gamma, T, delay, lags + 1, n)
+        # v̂'s share of the inputs, Nv_j = Σ_m K[j, m] C A^m B (:func:`_piece_coefficients`).
+        K = _piece_coefficients(self.stencil, T, float(delay), lags, series.c2, series.c3)
+        Nv = (K @ self._powers).reshape(lags + 2, n, n)
+        # G_y,j = M G_j - F_y N_j + N_(j+1), N_j = [0; Nv_j]; lags beyond input_lags folded.
+        G = (self.M @ steps).reshape(p, lags + 2, n).transpose(1, 0, 2)[: lags + 1]
+        G -= self.F[:, n:] @ Nv[: lags + 1]
+        G[:, n:] += Nv[1:]
+        if lags > input_lags:
+            G[input_lags] += G[input_lags + 1 :].sum(axis=0)
+        out[:] = G[: input_lags + 1].transpose(1, 0, 2).reshape(p, (input_lags + 1) * n)
+
+
 class SetpointLinearization:
     """``[F G₀ … G_L]`` of :func:`initial_model` at set point after set point, for a law that
     re-linearises every sample (``relinearize``): the same series, the workspace made once, the
@@ -220,18 +382,24 @@ class SetpointLinearization:
         n = model.nv
         self.model, self.data = model, model.createData()
         self.period, self.input_lags, self._n = float(period), int(input_lags), n
-        # Γ(s) = B s + A B s² c₂ + A² B s³ c₃ (Eq. 33b's series, corrected or printed).
-        self._c2, self._c3 = (0.5, 1.0 / 6.0) if form == "corrected" else (1.0, 0.5)
+        self._c2, self._c3 = _SERIES_COEFFICIENTS[form]
         self._A = np.zeros((2 * n, 2 * n))
         self._A[:n, n:] = np.eye(n)
         self._B = np.zeros((2 * n, n))
         self._eye = np.eye(2 * n)
 
     def __call__(
-        self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, delay: float = 0.0
+        self,
+        q: np.ndarray,
+        qd: np.ndarray,
+        tau: np.ndarray,
+        delay: float = 0.0,
+        stencil: VelocityStencil | None = None,
     ) -> np.ndarray:
         """``[F G₀ … G_L]`` (a fresh array, shape (2n, 2n + (L+1) n)) at ``(q, qd, tau)``, the
-        input split by ``delay`` (s) as :func:`split_input_matrix` splits it."""
+        input split by ``delay`` (s) as :func:`split_input_matrix` splits it; with a
+        ``stencil``, in the coordinates of a sample whose velocity it is
+        (:func:`sampled_coordinates`)."""
         n, T, lags = self._n, self.period, self.input_lags
         A, B = self._A, self._B
         ddq_dq, ddq_dv, minv = pin.computeABADerivatives(self.model, self.data, q, qd, tau)
@@ -239,18 +407,36 @@ class SetpointLinearization:
         A[n:, n:] = ddq_dv
         np.add(minv, minv.T, out=B[n:])
         B[n:] *= 0.5
-        A2 = A @ A
-        AB = A @ B
-        A2B = A @ AB
+        series = _Series(A.copy(), B.copy(), self._c2, self._c3)
         p = 2 * n
         out = np.zeros((p, p + (lags + 1) * n))
         np.add(self._eye, A * T, out=out[:, :p])
-        out[:, :p] += A2 * (T * T / 2.0)
+        out[:, :p] += series.A2 * (T * T / 2.0)
+        if stencil is not None and lags:
+            sampled = _SampledCoordinates(series, out[:, :p], stencil)
+            out[:, :p] = sampled.F
+            sampled.inputs(out[:, p:], T, delay, lags)
+            self._last: tuple[_Series, np.ndarray, _SampledCoordinates | None] = (
+                series,
+                out,
+                sampled,
+            )
+        else:
+            _split_into(out[:, p:], series.gamma, T, delay, lags, n)
+            self._last = (series, out, None)
+        return out
 
-        def gamma(s: float) -> np.ndarray:
-            return B * s + AB * (s * s * self._c2) + A2B * (s * s * s * self._c3)
-
-        _split_into(out[:, p:], gamma, T, delay, lags, n)
+    def with_delay(self, delay: float) -> np.ndarray:
+        """The last call's ``[F G₀ … G_L]`` with the input split by another ``delay`` (a fresh
+        array; the linearisation and the stencil's delay-free parts reused)."""
+        series, last, sampled = self._last
+        p = 2 * self._n
+        out = last.copy()
+        if sampled is not None:
+            sampled.inputs(out[:, p:], self.period, delay, self.input_lags)
+        else:
+            out[:, p:] = 0.0
+            _split_into(out[:, p:], series.gamma, self.period, delay, self.input_lags, self._n)
         return out
 
 
@@ -279,11 +465,14 @@ def initial_model(
     *,
     delay: float = 0.0,
     input_lags: int = 0,
+    stencil: VelocityStencil | None = None,
     data: pin.Data | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``F(0), G(0)`` of Eq. 33 at the first nominal point ``(q_d(0), qd_d(0), u_n(0))``;
-    with ``input_lags``, ``G(0)`` split by ``delay`` (:func:`split_input_matrix`). ``data``:
-    the model's workspace, for a caller that linearises every sample (made here if None).
+    with ``input_lags``, ``G(0)`` split by ``delay`` (:func:`split_input_matrix`) and, with a
+    ``stencil`` as well, the model of a sample whose velocity it is
+    (:func:`sampled_coordinates`). ``data``: the model's workspace, for a caller that
+    linearises every sample (made here if None).
 
     Returns
     -------
@@ -294,4 +483,11 @@ def initial_model(
     F, G = discretize_series(A, B, period, form)
     if input_lags == 0 and delay == 0.0:
         return F, G
-    return F, split_input_matrix(A, B, period, delay, input_lags, form)
+    G = split_input_matrix(A, B, period, delay, input_lags, form)
+    if stencil is None or not input_lags:
+        return F, G
+    model = np.hstack([F, G])
+    sampled_coordinates(
+        model, _Series(A, B, *_SERIES_COEFFICIENTS[form]), period, delay, stencil, input_lags
+    )
+    return model[:, : F.shape[0]], model[:, F.shape[0] :]

@@ -290,12 +290,17 @@ class RobotLoop:
         the delay it splits ``Ĝ(0)`` by at its next (re)start: one driver period, measured from
         the stamps. The command leaves in its state's callback and the driver applies it at its
         next write (ros2_control's read, update, write cycle); what a drive or the transport
-        add beyond that the identified lags learn.
+        add beyond that the identified lags learn. With a driver that sends no velocity it is
+        told the estimate's stencil too: the sampled velocity lags the arm's by what the inputs
+        did over the estimate's span (two driver periods), a lag its prior then models.
         """
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
         expect = getattr(self.law, "expect_input_delay", None)
         if expect is not None:
-            expect(driver_period)
+            # The arm may apply a command sooner (a simulator that waits for it) or a cycle
+            # later (a drive that adds one): the law scores each and takes the clearly better.
+            expect(driver_period, (2.0 * driver_period,))
+            self.law.expect_velocity_stencil(self.sampler.velocity_stencil())
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
@@ -405,6 +410,8 @@ class RobotLoop:
         if supervisor.in_charge == FALLBACK:
             if supervisor.update(k, error, error_qd, self.law, None, False) is None:
                 return backup
+            timing = getattr(self.law, "input_timing", None)
+            delay = None if timing is None else timing.delay
             out = self._update(self.law, args, u_n, applied)
             self.count("supervisor.handbacks")
             self.log(
@@ -412,6 +419,13 @@ class RobotLoop:
                 f"sample {k}: tracking error settled under the {self.fallback.kind} fallback; "
                 "the adaptive law commands again",
             )
+            if timing is not None and timing.delay != delay:
+                self.count("input_delay_changes")
+                self.log(
+                    "info",
+                    f"sample {k}: the adaptive law now models a command acting "
+                    f"{timing.delay * 1e3:.1f} ms after its state (it predicted the arm better)",
+                )
             return out
         out = self._update(self.law, args, u_n, applied)
         if out is None:

@@ -45,7 +45,9 @@ sample's time) and ``driver_period_*`` (estimated from the stamps); see
 The adaptive law is supervised (``supervisor.*``, :mod:`apc_feedback.supervisor`): when it goes
 wrong a fallback law (computed torque by default) commands until the error settles, and every
 trigger and hand-over is counted (``supervisor.<trigger>``, ``supervisor.handovers``,
-``supervisor.handbacks``).
+``supervisor.handbacks``). Its model of its input is there too: ``law.input_delay_ms`` (the
+delay its prior splits a command by: one driver period, or two once the data say the drive adds
+a cycle, ``input_delay_changes`` counting the switches) and ``law.input_lags``.
 """
 
 from __future__ import annotations
@@ -78,7 +80,7 @@ from apc_core.nodeutil import (
     split_ros_args,
 )
 from apc_core.params import ConfigError, Param, declare, params_from, subset
-from apc_feedback.controller import FeedbackError
+from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -99,11 +101,16 @@ class RobotDiagnostics(Diagnostics):
     refreshed whenever the status is built."""
 
     timing: SampleTiming | None = None
+    law: FeedbackLaw | None = None
 
     def status(self) -> DiagnosticStatus:
         if self.timing is not None:
             for key, value in self.timing.figures().items():
                 self.values[key] = f"{value:.1f}"
+        # The adaptive law's model of its input: the delay and the lags it carries.
+        if isinstance(self.law, AdaptiveFeedback):
+            self.values["law.input_delay_ms"] = f"{self.law.input_timing.delay * 1e3:.2f}"
+            self.values["law.input_lags"] = str(self.law.config.input_lags)
         return super().status()
 
 
@@ -218,7 +225,7 @@ class RobotNode(LifecycleNode):
             log=level_logger(self),
             **supervision,
         )
-        diag.timing = self.loop.timing
+        diag.timing, diag.law = self.loop.timing, self.loop.law
         self._period_ns = wire.seconds_to_ns(values["period"])
         self._sample_msg = JointState()
         self._setpoint_msg = JointTrajectory()

@@ -57,6 +57,7 @@ import numpy as np
 
 from apc_core.params import SettingError, check_settings, setting
 from apc_core.robot import PAPER_PERIOD_S
+from apc_feedback.linearize import VelocityStencil
 from apc_msgs_py import JointSample, WireError, seconds_to_ns
 
 
@@ -148,6 +149,28 @@ class VelocityEstimator:
         while len(history) > 3 and stamp_ns - history[1][0] >= self.window_ns:
             history.popleft()
         self.acceleration, self._estimated = None, False
+
+    def stencil(self, period_ns: int) -> VelocityStencil:
+        """The estimate as weights on past positions for states ``period_ns`` apart (a steady
+        driver): what the adaptive law's prior models (its ``expect_velocity_stencil``).
+
+        Read off this estimator's own rule: positions that are unit vectors, one per state, give
+        each state's weight as the velocity's entry.
+        """
+        if period_ns <= 0:
+            raise ValueError(f"period_ns must be > 0, got {period_ns}")
+        states = max(3, -(-self.window_ns // period_ns) + 2)
+        probe = VelocityEstimator(self.window_ns)
+        unit = np.eye(states)
+        for i in range(states - 1):
+            probe.add(i * period_ns, unit[i])
+        weights = probe.update((states - 1) * period_ns, unit[-1])
+        assert weights is not None
+        used = [i for i in range(states) if weights[i] != 0.0]
+        return VelocityStencil(
+            tuple((states - 1 - i) * period_ns * 1e-9 for i in used),
+            tuple(float(weights[i]) for i in used),
+        )
 
     def newest_acceleration(self) -> np.ndarray | None:
         """The parabola's acceleration at the newest state (None before three states)."""
@@ -251,6 +274,7 @@ class RobotSampler:
         self.watchdog_ns = seconds_to_ns(config.watchdog)
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
+        self.velocity_estimated = False  # the newest state came without a velocity
         self._intervals: deque[int] = deque(maxlen=PERIOD_INTERVALS)
         self.driver_period_ns = 0  # median stamp interval; 0 before two states
         self.sampling = False
@@ -300,7 +324,8 @@ class RobotSampler:
                 ordered = sorted(self._intervals)  # 15 ints: a tenth of numpy.median's cost
                 n = len(ordered)
                 self.driver_period_ns = int((ordered[(n - 1) // 2] + ordered[n // 2]) / 2)
-        if state.velocity is None:
+        self.velocity_estimated = state.velocity is None
+        if self.velocity_estimated:
             velocity = self.velocity.update(stamp, state.position)
         else:  # the driver's velocity; the estimate's acceleration only if _take carries it
             self.velocity.add(stamp, state.position)
@@ -309,6 +334,13 @@ class RobotSampler:
         if not self.sampling:
             return None
         return self._take(now_ns)
+
+    def velocity_stencil(self) -> VelocityStencil | None:
+        """The samples' velocity as a stencil of the driver's positions at its period (None:
+        the driver sends its velocity, or its period is not known yet)."""
+        if not self.velocity_estimated or self.driver_period_ns <= 0:
+            return None
+        return self.velocity.stencil(self.driver_period_ns)
 
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""

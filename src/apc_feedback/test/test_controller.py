@@ -398,7 +398,9 @@ def test_recommended_law_controls_its_lagged_integral_model(controller_robot):
         out = law.update(k, q, qd, q_d, qd_d, qdd_d, u_n, applied)
         dx = np.concatenate([q - q_d, qd - qd_d])
         F, G, w, Q, x = _lagged_model(law, dx)
-        expected = receding_horizon_control(F, G, w, Q, law.R, x, config.horizon + 2)
+        expected = receding_horizon_control(
+            F, G, w, Q, law.R, x, config.horizon + config.input_lags
+        )
         np.testing.assert_array_equal(out.du, expected)
         applied = u_n + out.du
 
@@ -498,3 +500,56 @@ def test_setpoint_linearization_is_initial_model(controller_robot, lags, delay, 
         tau = pin.rnea(model, model.createData(), q, qd, qdd)
         F, G = initial_model(model, q, qd, tau, 0.01, form, delay=delay, input_lags=lags)
         np.testing.assert_allclose(linearize(q, qd, tau, delay), np.hstack((F, G)), atol=1e-12)
+
+
+def test_a_velocity_stencil_gives_the_prior_of_the_sampled_state(controller_robot):
+    """Told the estimate's stencil, the law starts from :func:`initial_model` of that sample;
+    a bad stencil is refused; a law without lags ignores it (Eq. 16)."""
+    from apc_feedback.linearize import VelocityStencil
+
+    model = controller_robot.model
+    stencil = VelocityStencil((0.02, 0.01, 0.0), (50.0, -200.0, 150.0))
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    for relinearize in (False, True):
+        config = AdaptiveConfig(period=0.01, input_lags=3, relinearize=relinearize)
+        law = AdaptiveFeedback(model, config)
+        law.expect_input_delay(0.01)
+        law.expect_velocity_stencil(stencil)
+        law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+        F, G = initial_model(model, q_d, qd_d, u_n, 0.01, delay=0.01, input_lags=3, stencil=stencil)
+        np.testing.assert_allclose(law.rls.F, F, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(law.rls.G, G, rtol=1e-12, atol=1e-15)
+    with pytest.raises(FeedbackError, match="stencil"):
+        law.expect_velocity_stencil(VelocityStencil((0.01, -0.01), (1.0, -1.0)))
+    plain = AdaptiveFeedback(model, AdaptiveConfig(period=0.01))
+    plain.expect_velocity_stencil(stencil)
+    plain.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    F, G = initial_model(model, q_d, qd_d, u_n, 0.01)
+    np.testing.assert_array_equal(plain.rls.G, G)
+
+
+def test_the_model_carries_the_lags_the_samples_timing_needs(controller_robot):
+    """A law configured with two lags, told a 100 Hz driver's timing (a command a period late,
+    a velocity estimated over two periods), carries three from its next start and keeps its
+    weights' reconfiguration; told a measured velocity, it is back to two at the next start."""
+    from apc_feedback.linearize import VelocityStencil
+
+    model = controller_robot.model
+    config = AdaptiveConfig(period=0.01, input_lags=2, relinearize=True)
+    law = AdaptiveFeedback(model, config)
+    law.expect_input_delay(0.01)
+    law.expect_velocity_stencil(VelocityStencil((0.02, 0.01, 0.0), (50.0, -200.0, 150.0)))
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    assert law.config.input_lags == 3 and law.rls.G.shape == (6, 12)
+    law.reconfigure(AdaptiveConfig(period=0.01, input_lags=2, relinearize=True, r=1e-5))
+    assert law.config.input_lags == 3 and law.R[0, 0] == 1e-5
+    with pytest.raises(FeedbackError, match="identifier"):
+        law.reconfigure(AdaptiveConfig(period=0.01, input_lags=3, relinearize=True))
+    law.update(1, q, qd, q_d, qd_d, qdd_d, u_n, u_n)
+    law.expect_velocity_stencil(None)
+    law.reset()
+    law.update(2, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    assert law.config.input_lags == 2 and law.rls.G.shape == (6, 9)

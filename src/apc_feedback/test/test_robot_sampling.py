@@ -263,6 +263,38 @@ def test_the_drivers_velocity_is_used_when_sent_and_estimated_when_not():
     assert s.newest.velocity == pytest.approx([7.0])
 
 
+@pytest.mark.parametrize("window_ms", [0, 10, 25])
+@pytest.mark.parametrize("driver_ms", [10, 4, 1])
+def test_the_stencil_is_the_estimate_on_a_steady_driver(window_ms, driver_ms):
+    """The weights the law's prior models give the velocity the estimator gives, on any
+    positions from a driver at a steady period."""
+    est = VelocityEstimator(window_ns=window_ms * MS)
+    stencil = est.stencil(driver_ms * MS)
+    assert len(stencil.offsets) == 3 and stencil.offsets[-1] == 0.0
+    assert sum(stencil.weights) == pytest.approx(0.0, abs=1e-9)
+    rng = np.random.default_rng(window_ms + driver_ms)
+    positions = rng.standard_normal((40, 2))
+    for i, q in enumerate(positions):
+        v = est.update(i * driver_ms * MS, q)
+    newest = len(positions) - 1
+    expected = sum(
+        w * positions[newest - round(s / (driver_ms * 1e-3))]
+        for s, w in zip(stencil.offsets, stencil.weights, strict=True)
+    )
+    np.testing.assert_allclose(v, expected, rtol=1e-12, atol=1e-9)
+
+
+def test_the_sampler_gives_a_stencil_only_for_an_estimated_velocity():
+    s = _sampler()
+    assert s.velocity_stencil() is None  # no driver period yet
+    for i in range(3):
+        s.offer(_state(i * T, 0.0), i * T)
+    assert s.velocity_stencil() == s.velocity.stencil(T)
+    assert s.velocity_stencil().offsets == (0.02, 0.01, 0.0)
+    s.offer(_state(3 * T, 0.0, 0.0), 3 * T)  # this driver sends its velocity
+    assert s.velocity_stencil() is None
+
+
 def test_the_velocity_estimate_starts_afresh_after_a_gap_in_the_states():
     s = _sampler(max_age=0.02)
     for i in range(5):

@@ -107,6 +107,7 @@ def run_robot_loop(
     duration_s: float,
     *,
     goal_deg: Sequence[float] | None = None,
+    hold_s: float = 0.2,
     driver_ms: float = 2.0,
     period_ms: float = 10.0,
     phase_ms: float = 0.3,
@@ -120,14 +121,15 @@ def run_robot_loop(
     effects: ArmEffects | None = None,
     arm: Scenario | None = None,
 ) -> RobotRun:
-    """Activate at the start pose, hold, and (with ``goal_deg``) move there 0.2 s later.
+    """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
     Parameters
     ----------
     duration_s : float
         Run time after activation (s).
     goal_deg : sequence of float, optional
-        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, 0.2 s after activation.
+        A 4-3-4 move (0.2, 0.6, 0.2 s) from the measured position, ``hold_s`` (s) after
+        activation (default 0.2).
     driver_ms, phase_ms : float
         The driver's period and its cycles' phase after a multiple of T (ms).
     period_ms : float
@@ -236,12 +238,12 @@ def run_robot_loop(
             loop.command_published(now)
         plan = loop.plan.feedforward
         if not moved and plan is not None and step.setpoint is not None:
-            # The move, from the held position, starts 0.2 s after the first sample (a user's
+            # The move, from the held position, starts hold_s after the first sample (a user's
             # goal; a 4-3-4 as the feedforward's first move).
             assert goal_deg is not None
             start = step.setpoint.q
             move = FourThreeFour(start, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
-            plan.set_trajectory(move, step.setpoint.k + round(0.2 / T))
+            plan.set_trajectory(move, step.setpoint.k + round(hold_s / T))
             moved = True
 
     # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a

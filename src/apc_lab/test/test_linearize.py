@@ -11,11 +11,13 @@ import pytest
 from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
 from apc_feedback.linearize import (
     LinearizeError,
+    VelocityStencil,
     continuous_jacobians,
     discretize_exact,
     discretize_series,
     initial_model,
     split_input_matrix,
+    stencil_lags,
 )
 from apc_lab.scenario import CONFIG_DIR, PAPER_JOINT_SIGN
 from apc_plant_sim.plant import Plant, PlantConfig
@@ -205,3 +207,98 @@ def test_split_input_matrix_takes_a_longer_delay_as_the_last_lag():
     np.testing.assert_array_equal(split_input_matrix(A, B, T, 0.0, 0), G)
     with pytest.raises(LinearizeError, match="delay"):
         split_input_matrix(A, B, T, -1e-3, 1)
+
+
+#: Robot mode's estimate on a driver at T: the parabola through the last three states.
+PARABOLA = VelocityStencil((0.0, T, 2 * T), (1.5 / T, -2.0 / T, 0.5 / T))
+
+
+def test_the_parabola_on_a_late_input_is_exact_for_a_double_integrator():
+    """A command one period late seen through the parabola: the hand-derived model, against
+    Eq. 33's ``G`` all at lag 1. Its matrices still sum to Eq. 33's ``G``."""
+    A, B = _double_integrator()
+    F0, G0 = discretize_series(A, B, T)
+    F, G = _sampled(A, B, delay=T, lags=3)
+    np.testing.assert_allclose(F, F0, atol=1e-15)
+    expected = [(0.0, 0.0), (T**2 / 2, 3 * T / 4), (T**2 / 4, T / 2), (-(T**2) / 4, -T / 4)]
+    for j, (position, velocity) in enumerate(expected):
+        np.testing.assert_allclose(G[:2, 2 * j : 2 * j + 2], position * np.eye(2), atol=1e-15)
+        np.testing.assert_allclose(G[2:, 2 * j : 2 * j + 2], velocity * np.eye(2), atol=1e-15)
+    np.testing.assert_allclose(G.reshape(4, 4, 2).sum(axis=1), G0, atol=1e-15)
+
+
+def _sampled(A, B, delay, lags, stencil=PARABOLA):
+    from apc_feedback.linearize import _SERIES_COEFFICIENTS, _Series, sampled_coordinates
+
+    F, _ = discretize_series(A, B, T)
+    model = np.hstack([F, split_input_matrix(A, B, T, delay, lags)])
+    sampled_coordinates(
+        model, _Series(A, B, *_SERIES_COEFFICIENTS["corrected"]), T, delay, stencil, lags
+    )
+    return model[:, : A.shape[0]], model[:, A.shape[0] :]
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.004, 0.010, 0.013])
+def test_the_sampled_model_predicts_the_estimated_velocity_of_an_arm(puma, delay):
+    """The PUMA linearised at the paper's start, run as a continuous system with each command
+    applied ``delay`` late, sampled as robot mode samples a driver that sends no velocity (the
+    position, and the parabola through the last three positions): the sampled model predicts
+    the next sample to the series' truncation; Eq. 33's split, which takes the parabola for
+    the velocity, is off by the inputs' effect over the parabola's span."""
+    A, B = continuous_jacobians(
+        puma.model, puma.model.createData(), *_gravity_point(puma, PAPER_START_DH)
+    )
+    lags = stencil_lags(PARABOLA, T, delay)
+    assert lags == int(np.ceil((delay + 2 * T) / T - 1e-9))
+    F, G = _sampled(A, B, delay, lags)
+    F_eq33, _ = discretize_series(A, B, T)
+    G_split = split_input_matrix(A, B, T, delay, lags)
+    rng = np.random.default_rng(7)
+    commands = [rng.standard_normal(3) * 20 for _ in range(lags + 4)]  # oldest first
+    # Positions at the samples k-3 .. k+1 of the continuous system, each step exact.
+    x = rng.standard_normal(6) * 0.01
+    positions = []
+    for i in range(lags + 4):
+        positions.append(x[:3].copy())
+        recent = commands[max(0, i - 2) : i + 1][::-1]  # u(i), u(i-1), u(i-2)
+        recent += [np.zeros(3)] * (3 - len(recent))
+        x = _delayed_step(A, B, x, recent, delay, T)
+    positions.append(x[:3].copy())
+
+    def sample(i):
+        q0, q1, q2 = positions[i], positions[i - 1], positions[i - 2]
+        return np.concatenate([q0, (1.5 * q0 - 2.0 * q1 + 0.5 * q2) / T])
+
+    k = lags + 3
+    inputs = np.concatenate([commands[k - j] for j in range(lags + 1)])
+    truth = sample(k + 1)
+    sampled_error = np.abs(F @ sample(k) + G @ inputs - truth).max()
+    eq33_error = np.abs(F_eq33 @ sample(k) + G_split @ inputs - truth).max()
+    assert sampled_error < 1e-3 * eq33_error
+    assert eq33_error > 1e-3  # rad/s: what the parabola's lag costs the unmodelled split
+
+
+def test_lags_beyond_the_model_s_go_to_its_last():
+    """With fewer lags than the sample needs, the rest is added to the last: the sum stays."""
+    A, B = _double_integrator()
+    _, G3 = _sampled(A, B, delay=T, lags=3)
+    _, G2 = _sampled(A, B, delay=T, lags=2)
+    np.testing.assert_allclose(G2[:, :4], G3[:, :4], atol=1e-15)
+    np.testing.assert_allclose(G2[:, 4:], G3[:, 4:6] + G3[:, 6:], atol=1e-15)
+
+
+def test_initial_model_takes_the_stencil_only_with_lags(puma):
+    q, qd, tau = _gravity_point(puma, PAPER_START_DH)
+    plain = initial_model(puma.model, q, qd, tau, T, delay=T, input_lags=3)
+    sampled = initial_model(puma.model, q, qd, tau, T, delay=T, input_lags=3, stencil=PARABOLA)
+    assert np.abs(sampled[1] - plain[1]).max() > 1e-4
+    # Their sum is Eq. 33's G for a double integrator; the arm's own dynamics over the
+    # parabola's span move it a little.
+    np.testing.assert_allclose(
+        sampled[1].reshape(6, 4, 3).sum(axis=1), plain[1].reshape(6, 4, 3).sum(axis=1), rtol=0.01
+    )
+    eq16 = initial_model(puma.model, q, qd, tau, T)
+    for got, want in zip(
+        initial_model(puma.model, q, qd, tau, T, stencil=PARABOLA), eq16, strict=True
+    ):
+        np.testing.assert_array_equal(got, want)
