@@ -254,6 +254,36 @@ def test_the_fallback_holds_an_arm_whose_input_gain_is_forced_wrong_and_hands_ba
     assert levels == ["warn", "info"]  # one line per event
 
 
+@pytest.mark.parametrize("late_ms", [0.0, 10.0])
+def test_a_hand_back_on_a_100hz_driver_approaches_the_hold_again(late_ms):
+    """Ĝ's sign flipped on a 100 Hz hold, commands on time or a period late (a drive that
+    adds a cycle). The fallback holds with its sag under the unknown 5 lb (3.9 deg on joint 3);
+    the law takes the joints back at the next sample with the hold approached again from there
+    over ``approach_time``, with the fallback's commands on their way known, and the delay the
+    data chose: one hand-over, one hand-back, the hold kept (measured 4.1 / 4.5 deg worst, at
+    the flip; 0.00 deg at the end). Asked to remove the sag at once (``approach_time: 0``) the
+    law re-trips at every hand-back and is latched out, the arm left at the sag."""
+
+    def run(approach_time: float):
+        return run_robot_loop(
+            4.0,
+            driver_ms=10.0,
+            phase_ms=0.0,
+            latency=Latency(fixed_ms=late_ms) if late_ms else None,
+            supervisor=SupervisorConfig(approach_time=approach_time),
+            setup=_force_input_gain(-1.0),
+        )
+
+    approached = run(0.5)
+    assert approached.counts["supervisor.handovers"] == 1
+    assert approached.counts["supervisor.handbacks"] == 1
+    assert approached.max_deviation_deg() < 5.0
+    assert approached.tracking_error_deg()[-1].max() < 0.05
+    at_once = run(0.0)
+    assert at_once.counts["supervisor.latched"] == 1
+    assert at_once.tracking_error_deg()[-1].max() > 3.0
+
+
 def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_with_it():
     """A 100 Hz driver with 30 % of commands 6 ms late and Eq. 16's model (no input lags): the
     hold is lost (1169 deg); supervised it stays within 10 deg (measured 4.1: the fallback's
@@ -431,8 +461,9 @@ def test_every_command_a_period_late_on_a_100hz_driver_never_loses_the_supervise
     hand-back the law is latched out (3 hand-overs, the fallback's 3.8 deg sag under the unknown
     5 lb at the end). With the prior in the estimated velocity's coordinates it reached
     11.0 deg; the law now scores one and two periods and its first hand-back takes two
-    (7.15 deg; still lost from the fallback's sagging hold, as the law is from any hand-back on
-    a 100 Hz driver: docs/robot.md)."""
+    (7.15 deg), and a hand-back approaches the hold again from where the arm sagged, the
+    fallback's commands in flight known: the second hand-back holds (2 hand-overs, no latch,
+    the arm at the hold, 0.00 deg, at the end; the goal was aborted at the first excursion)."""
     laws = []
 
     def robot_file(loop):
@@ -451,9 +482,9 @@ def test_every_command_a_period_late_on_a_100hz_driver_never_loses_the_supervise
     )
     assert run.max_tracking_error_deg() < 10.0
     assert laws[0].input_timing.delay == pytest.approx(0.02)
-    assert run.counts["supervisor.handovers"] == 3 and run.counts["supervisor.handbacks"] == 2
-    assert run.counts["supervisor.latched"] == 1
-    assert [level for level, text in run.lines if "latched" in text] == ["error"]
+    assert run.counts["supervisor.handovers"] == 2 and run.counts["supervisor.handbacks"] == 2
+    assert not run.counts["supervisor.latched"]
     q = run.q
     assert len(q) == 600 + 4  # the run lasted (the plant never left its limits)
-    assert np.rad2deg(np.abs(q[-100:] - q[-1]).max()) < 0.05  # the fallback holds still
+    assert np.rad2deg(np.abs(q[-100:] - q[-1]).max()) < 0.05  # the law holds still
+    assert run.tracking_error_deg()[-1].max() < 0.05  # at the hold, not at the fallback's sag

@@ -17,13 +17,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
-from apc_feedback.adaptive_config import AdaptiveConfig, FeedbackError
+from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
 from apc_feedback.linearize import (
@@ -176,6 +177,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._relinearize_every = max(1, round(RELINEARIZE_PERIOD_S / config.period))
         self._next_relinearize = 0
         self.input_timing = InputTiming(config.input_delay)
+        # (k, δu) another law sent while this one was idle: on their way at its next start.
+        self._observed: deque[tuple[int, np.ndarray]] = deque(maxlen=MAX_INPUT_LAGS + 1)
         self._set_weights(config)
         self.reset()
 
@@ -297,6 +300,10 @@ class AdaptiveFeedback(FeedbackLaw):
             # Before the first sample the arm is taken to hold its nominal torque (δu = 0), as
             # Eq. 16's first step takes it: identification starts at sample 1 with or without lags.
             self._inputs.fill(0.0)
+            for k_sent, du_sent in self._observed:  # a fallback's commands still on their way
+                if 0 <= k - 1 - k_sent < len(self._inputs):
+                    self._inputs[k - 1 - k_sent] = du_sent
+            self._observed.clear()
             self._inputs_known = lags
             self._started = True
         elif k != self._k_prev + 1:
@@ -409,6 +416,16 @@ class AdaptiveFeedback(FeedbackLaw):
         each one's prior predicts the arm, and a restart (a hand-back) takes the one that
         predicts clearly best (:class:`apc_feedback.input_timing.DelayChoice`)."""
         self.input_timing.expect_delay(seconds, candidates)
+
+    def observe_command(self, k: int, u_n: np.ndarray, du: np.ndarray) -> None:
+        """Another law (a fallback) sent ``u_n + du`` at sample ``k`` while this one is idle:
+        with lags, its next start plans with the commands still on their way as they are, not
+        as ``u_n`` (δu = 0). A fallback holding an unknown payload sends 10-20 N m more than
+        ``u_n``; on a 100 Hz driver with a drive that adds a cycle four of its commands are in
+        flight at a hand-back."""
+        if self.config.input_lags or self._configured_lags:
+            command = np.clip(u_n + du, self._effort_floor, self._effort_limit)
+            self._observed.append((k, command - u_n))
 
     def expect_velocity_stencil(self, stencil: VelocityStencil | None) -> None:
         """From the next (re)start, the samples' velocity is ``stencil`` of past positions

@@ -187,6 +187,14 @@ class SupervisorConfig:
         1,
         1000,
     )
+    approach_time: float = setting(
+        0.5,
+        "hand-back during a hold: the law takes the joints at the next sample and the hold is "
+        "approached again from the measured position over this (s); 0: the law takes the "
+        "fallback's error at once",
+        0.0,
+        60.0,
+    )
     error_lead: float = setting(
         2.0,
         "tracking_error trigger: judge q - q_d + lead (qd - qd_d), the error when a fallback's "

@@ -553,3 +553,27 @@ def test_the_model_carries_the_lags_the_samples_timing_needs(controller_robot):
     law.reset()
     law.update(2, q, qd, q_d, qd_d, qdd_d, u_n, None)
     assert law.config.input_lags == 2 and law.rls.G.shape == (6, 9)
+
+
+def test_a_start_plans_with_the_commands_another_law_sent(controller_robot):
+    """Commands a fallback sent while the law was idle are its inputs in flight at its start,
+    within the effort limits, newest first; older ones and a law without lags ignore them."""
+    model = controller_robot.model
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    law = AdaptiveFeedback(model, AdaptiveConfig(period=0.01, input_lags=2))
+    limit = law._effort_limit
+    for k, du in ((6, np.full(3, 5.0)), (7, np.full(3, 1e9)), (8, np.array([1.0, 2.0, 3.0]))):
+        law.observe_command(k, u_n, du)
+    law.update(9, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    inputs = law._inputs
+    np.testing.assert_allclose(inputs[0], [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(inputs[1], np.minimum(u_n + 1e9, limit) - u_n)
+    np.testing.assert_allclose(inputs[2], np.full(3, 5.0))
+    law.reset()
+    law.observe_command(2, u_n, np.ones(3))  # long before the next start
+    law.update(20, q, qd, q_d, qd_d, qdd_d, u_n, None)
+    assert not law._inputs.any()
+    plain = AdaptiveFeedback(model, AdaptiveConfig(period=0.01))
+    plain.observe_command(0, u_n, np.ones(3))
+    plain.update(1, q, qd, q_d, qd_d, qdd_d, u_n, None)  # Eq. 16: nothing in flight

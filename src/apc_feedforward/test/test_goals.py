@@ -235,3 +235,24 @@ def test_a_restart_drops_plan_and_goals_and_holds_the_position_measured_then(rob
     fresh = queue(robot, first_goal=target)
     fresh.restart()
     assert fresh.first_goal is not None
+
+
+def test_a_hold_is_approached_again_from_where_the_arm_is(robot):
+    """Robot mode's hand-back from a fallback: the set point starts where the arm sagged to and
+    reaches the hold at rest after ``duration``; a motion under way or goals queued are kept."""
+    q = queue(robot)
+    q.sample(0, Q0, keep)  # holding Q0
+    sagged = Q0 + np.deg2rad([0.0, -1.0, -3.9])
+    assert q.approach_hold(50, sagged, 0.5)
+    start, end = q.sample(50, Q0, keep).setpoint, q.sample(100, Q0, keep).setpoint
+    np.testing.assert_allclose(start.q, sagged, atol=1e-12)
+    np.testing.assert_allclose(end.q, Q0, atol=1e-12)
+    assert_array_equal(start.qd, np.zeros(3))
+    assert_array_equal(q.sample(130, Q0, keep).setpoint.q, end.q)
+    moving = queue(robot, first_goal=Q0 + 0.2)
+    moving.sample(0, Q0, keep)  # the first move under way
+    assert not moving.approach_hold(10, sagged, 0.5)
+    queued = queue(robot)
+    queued.sample(0, Q0, keep)
+    queued.add(goal([0.5], [Q0 - 0.1]))
+    assert not queued.approach_hold(10, sagged, 0.5)
