@@ -255,17 +255,6 @@ class GoalQueue:
         self._last_q = None
         return dropped
 
-    def rejoin(self, k: int, position: np.ndarray, duration: float) -> bool:
-        """A hold approached again from ``position`` (where the arm is), from sample ``k``
-        over ``duration`` s (a quintic, at rest at both ends); whether the plan was holding
-        (a motion under way, or goals queued, are left as they are)."""
-        ff = self.feedforward
-        if ff is None or self.queued or k < ff.end_k():
-            return False
-        hold = ff.trajectory.sample(ff.trajectory.duration)[0]
-        ff.set_trajectory(Quintic(np.asarray(position, dtype=float), hold, duration), k)
-        return True
-
     def approach_hold(self, k: int, position: np.ndarray, duration: float) -> bool:
         """Approach the hold again from ``position`` (where the arm is), from sample ``k``
         over ``duration`` s (a quintic, at rest at both ends; robot mode's hand-back from a
