@@ -482,6 +482,10 @@ def test_every_command_a_period_late_on_a_100hz_driver_never_loses_the_supervise
     )
     assert run.max_tracking_error_deg() < 10.0
     assert laws[0].input_timing.delay == pytest.approx(0.02)
+    assert run.counts["input_delay_changes"] == 1  # counted and logged once
+    assert (
+        len([text for _, text in run.lines if "now models a command acting 20.0 ms" in text]) == 1
+    )
     assert run.counts["supervisor.handovers"] == 2 and run.counts["supervisor.handbacks"] == 2
     assert not run.counts["supervisor.latched"]
     q = run.q

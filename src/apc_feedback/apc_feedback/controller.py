@@ -423,7 +423,7 @@ class AdaptiveFeedback(FeedbackLaw):
         as ``u_n`` (δu = 0). A fallback holding an unknown payload sends 10-20 N m more than
         ``u_n``; on a 100 Hz driver with a drive that adds a cycle four of its commands are in
         flight at a hand-back."""
-        if self.config.input_lags or self._configured_lags:
+        if self.config.input_lags:
             command = np.clip(u_n + du, self._effort_floor, self._effort_limit)
             self._observed.append((k, command - u_n))
 

@@ -232,41 +232,38 @@ _SERIES_COEFFICIENTS: dict[str, tuple[float, float]] = {
 
 
 class _Series:
-    """``Φ(s) = I + A s + A² s²/2`` and ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` (Eq. 33's series,
-    ``c₂, c₃``: its corrected or printed form), for ``s`` of either sign."""
+    """``A``, ``B`` and the products Eq. 33's series needs; ``Γ(s) = B s + A B s² c₂ + A² B s³
+    c₃`` (``c₂, c₃``: its corrected or printed form)."""
 
     def __init__(self, A: np.ndarray, B: np.ndarray, c2: float, c3: float) -> None:
         self.A, self.B, self.A2 = A, B, A @ A
         self.AB = A @ B
         self.A2B = A @ self.AB
         self.c2, self.c3 = c2, c3
-        self.eye = np.eye(A.shape[0])
-
-    def phi(self, s: float) -> np.ndarray:
-        return self.eye + self.A * s + self.A2 * (s * s / 2.0)
 
     def gamma(self, s: float) -> np.ndarray:
         return self.B * s + self.AB * (s * s * self.c2) + self.A2B * (s * s * s * self.c3)
 
 
 def sampled_coordinates(
-    model: np.ndarray,
+    F: np.ndarray,
     series: _Series,
     period: float,
     delay: float,
     stencil: VelocityStencil,
     input_lags: int,
-) -> None:
-    """Express ``model = [F G₀ … G_L]`` (2n rows; ``G`` split by ``delay``) in place in the
+) -> tuple[np.ndarray, np.ndarray]:
+    """``F_y, [G_y,0 … G_y,L]``: Eq. 33's ``F`` and its input split by ``delay``, in the
     coordinates of a sample whose velocity is ``stencil`` of positions (the module docstring).
 
     The exact model may need more lags than ``input_lags`` (:func:`stencil_lags`); those beyond
     are added to ``G_L``, so that the matrices' sum, the effect of a held input, is kept.
     """
-    p = model.shape[0]
-    sampled = _SampledCoordinates(series, model[:, :p], stencil)
-    model[:, :p] = sampled.F
-    sampled.inputs(model[:, p:], period, delay, input_lags)
+    p = F.shape[0]
+    sampled = _SampledCoordinates(series, F, stencil)
+    G = np.empty((p, (input_lags + 1) * (p // 2)))
+    sampled.inputs(G, period, delay, input_lags)
+    return sampled.F, G
 
 
 #: Powers of ``A`` in a piece of :func:`_piece_coefficients`: ``C A^m B``, m = 0 … 6.
@@ -483,11 +480,7 @@ def initial_model(
     F, G = discretize_series(A, B, period, form)
     if input_lags == 0 and delay == 0.0:
         return F, G
-    G = split_input_matrix(A, B, period, delay, input_lags, form)
-    if stencil is None or not input_lags:
-        return F, G
-    model = np.hstack([F, G])
-    sampled_coordinates(
-        model, _Series(A, B, *_SERIES_COEFFICIENTS[form]), period, delay, stencil, input_lags
-    )
-    return model[:, : F.shape[0]], model[:, F.shape[0] :]
+    if stencil is not None and input_lags:
+        series = _Series(A, B, *_SERIES_COEFFICIENTS[form])
+        return sampled_coordinates(F, series, period, delay, stencil, input_lags)
+    return F, split_input_matrix(A, B, period, delay, input_lags, form)

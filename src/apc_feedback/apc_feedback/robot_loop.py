@@ -200,6 +200,9 @@ class RobotLoop:
         self.command_state_ns: int | None = None  # driver stamp of the newest law command's
         # state, until its publish is reported
         self.timing = SampleTiming()
+        # The adaptive law's model of its input, and the delay it used at its last step.
+        self._input_timing = getattr(self.law, "input_timing", None)
+        self._modelled_delay: float | None = None
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
@@ -297,8 +300,8 @@ class RobotLoop:
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
         expect = getattr(self.law, "expect_input_delay", None)
         if expect is not None:
-            # The arm may apply a command sooner (a simulator that waits for it) or a cycle
-            # later (a drive that adds one): the law scores each and takes the clearly better.
+            # The arm may apply a command a cycle later (a drive that adds one): the law scores
+            # both delays and a restart takes the clearly better.
             expect(driver_period, (2.0 * driver_period,))
             self.law.expect_velocity_stencil(self.sampler.velocity_stencil())
         if self.supervisor is not None and self.fallback is not None:
@@ -428,8 +431,6 @@ class RobotLoop:
                     f"hold again from the measured position over {approach:g} s",
                 )
                 return backup
-            timing = getattr(self.law, "input_timing", None)
-            delay = None if timing is None else timing.delay
             out = self._update(self.law, args, u_n, applied)
             self.count("supervisor.handbacks")
             self.log(
@@ -437,15 +438,10 @@ class RobotLoop:
                 f"sample {k}: tracking error settled under the {self.fallback.kind} fallback; "
                 "the adaptive law commands again",
             )
-            if timing is not None and timing.delay != delay:
-                self.count("input_delay_changes")
-                self.log(
-                    "info",
-                    f"sample {k}: the adaptive law now models a command acting "
-                    f"{timing.delay * 1e3:.1f} ms after its state (it predicted the arm better)",
-                )
+            self._report_delay_change(k)
             return out
         out = self._update(self.law, args, u_n, applied)
+        self._report_delay_change(k)  # a hand-back's start at the sample after the approach's
         if out is None:
             return None
         clipped = bool(any_true(np.abs(u_n + out.du) > self._limit))
@@ -455,6 +451,22 @@ class RobotLoop:
         self.count(f"supervisor.{trigger}")
         self._hand_over(k, f"supervisor trigger {trigger!r}")
         return backup
+
+    def _report_delay_change(self, k: int) -> None:
+        """After a step of the adaptive law: count and log once a start at which it took
+        another delay than the one it used before (a re-told delay it chose again is none)."""
+        timing = self._input_timing
+        if timing is None or timing.delay == self._modelled_delay:
+            return
+        changed = self._modelled_delay is not None
+        self._modelled_delay = timing.delay
+        if changed:
+            self.count("input_delay_changes")
+            self.log(
+                "info",
+                f"sample {k}: the adaptive law now models a command acting "
+                f"{timing.delay * 1e3:.1f} ms after its state (it predicted the arm better)",
+            )
 
     def _hand_over(self, k: int, why: str) -> None:
         """The fallback takes the joints; the adaptive law restarts its identification."""

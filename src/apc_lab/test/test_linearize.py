@@ -231,11 +231,8 @@ def _sampled(A, B, delay, lags, stencil=PARABOLA):
     from apc_feedback.linearize import _SERIES_COEFFICIENTS, _Series, sampled_coordinates
 
     F, _ = discretize_series(A, B, T)
-    model = np.hstack([F, split_input_matrix(A, B, T, delay, lags)])
-    sampled_coordinates(
-        model, _Series(A, B, *_SERIES_COEFFICIENTS["corrected"]), T, delay, stencil, lags
-    )
-    return model[:, : A.shape[0]], model[:, A.shape[0] :]
+    series = _Series(A, B, *_SERIES_COEFFICIENTS["corrected"])
+    return sampled_coordinates(F, series, T, delay, stencil, lags)
 
 
 @pytest.mark.parametrize("delay", [0.0, 0.004, 0.010, 0.013])
