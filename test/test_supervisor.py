@@ -284,6 +284,36 @@ def test_a_hand_back_on_a_100hz_driver_approaches_the_hold_again(late_ms):
     assert at_once.tracking_error_deg()[-1].max() > 3.0
 
 
+def test_a_hand_back_during_a_move_rejoins_the_move_from_the_measured_state():
+    """Ĝ's sign flipped 0.2 s into the paper's move on a 100 Hz driver, a short dwell
+    (``settle_time`` 0.05 s) so that the fallback's error settles while the move goes on: the
+    law takes the joints back 0.79 s into the 1 s move with the set point rejoining the move from
+    the measured state over ``approach_time``: one hand-over, one hand-back, the move finished
+    (measured 4.5 deg worst, at the flip; 0.00 deg at the end). Handed the fallback's error at
+    once (``approach_time: 0``; before the rejoin a hand-back during a move was) the law
+    re-trips within five samples, twice, and is latched out at the fallback's 3.7 deg sag."""
+
+    def run(approach_time: float):
+        return run_robot_loop(
+            2.5,
+            goal_deg=GOAL_DEG,
+            driver_ms=10.0,
+            supervisor=SupervisorConfig(settle_time=0.05, approach_time=approach_time),
+            setup=_force_input_gain(-1.0, 5040),
+        )
+
+    rejoined = run(0.5)
+    assert rejoined.counts["supervisor.handovers"] == 1
+    assert rejoined.counts["supervisor.handbacks"] == 1
+    (back,) = [text for _, text in rejoined.lines if "settled" in text]
+    assert int(back.split()[1].rstrip(":")) < 5020 + 100  # during the move (0.2 s + 1 s)
+    assert rejoined.max_tracking_error_deg() < 5.0
+    assert rejoined.tracking_error_deg()[-1].max() < 0.05
+    at_once = run(0.0)
+    assert at_once.counts["supervisor.latched"] == 1
+    assert at_once.tracking_error_deg()[-1].max() > 3.0
+
+
 def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_with_it():
     """A 100 Hz driver with 30 % of commands 6 ms late and Eq. 16's model (no input lags): the
     hold is lost (1169 deg); supervised it stays within 10 deg (measured 4.1: the fallback's

@@ -403,8 +403,8 @@ class RobotLoop:
         such as a PID's integral, current). The adaptive law, reset when the fallback takes
         over, is idle while the fallback commands (it is shown the commands sent, which are
         still on their way when it takes over): its first sample at the hand-back starts it
-        from Eq. 33 there. A hand-back during a hold gives the law the joints at the next sample
-        with the hold approached again from the measured position (``approach_time``): asked to
+        from Eq. 33 there. A hand-back gives the law the joints at the next sample with the
+        plan, hold or motion, rejoined from the measured state (``approach_time``): asked to
         remove the fallback's sag under an unknown payload at once, the law on a 100 Hz driver
         asked for 135-380 N m within two samples and re-tripped within five, at every
         hand-back. Identifying from the fallback's hold instead (its applied torques)
@@ -422,13 +422,16 @@ class RobotLoop:
             if supervisor.update(k, error, error_qd, self.law, None, False) is None:
                 return backup
             approach = supervisor.config.approach_time
-            if approach > 0.0 and self.plan.approach_hold(k + 1, args[1], approach):
+            # The set point of the law's first sample is the state the fallback left (starting
+            # from the state extrapolated to that sample tripped the law again on a 100 Hz
+            # driver with every command a period late, test_supervisor).
+            if approach > 0.0 and self.plan.rejoin(k + 1, args[1], args[2], approach):
                 self.count("supervisor.handbacks")
                 self.log(
                     "info",
                     f"sample {k}: tracking error settled under the {self.fallback.kind} "
-                    f"fallback; the adaptive law commands from the next sample, approaching the "
-                    f"hold again from the measured position over {approach:g} s",
+                    f"fallback; the adaptive law commands from the next sample, rejoining the "
+                    f"plan from the measured state over {approach:g} s",
                 )
                 return backup
             out = self._update(self.law, args, u_n, applied)

@@ -189,9 +189,9 @@ class SupervisorConfig:
     )
     approach_time: float = setting(
         0.5,
-        "hand-back during a hold: the law takes the joints at the next sample and the hold is "
-        "approached again from the measured position over this (s); 0: the law takes the "
-        "fallback's error at once",
+        "hand-back: the law takes the joints at the next sample and the plan (hold or motion) "
+        "is rejoined from the measured state over this (s); 0: the law takes the fallback's "
+        "error at once",
         0.0,
         60.0,
     )

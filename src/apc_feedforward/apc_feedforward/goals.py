@@ -27,6 +27,7 @@ from apc_feedforward.four_three_four import LIFT_OFF, SEGMENT_TIMES, SET_DOWN, F
 from apc_feedforward.nominal import Feedforward, Setpoint
 from apc_feedforward.trajectory import (
     Quintic,
+    Rejoin,
     Trajectory,
     TrajectoryError,
     Waypoints,
@@ -255,16 +256,16 @@ class GoalQueue:
         self._last_q = None
         return dropped
 
-    def approach_hold(self, k: int, position: np.ndarray, duration: float) -> bool:
-        """Approach the hold again from ``position`` (where the arm is), from sample ``k``
-        over ``duration`` s (a quintic, at rest at both ends; robot mode's hand-back from a
-        fallback); whether the plan was holding (a motion under way or to come, or goals
-        queued, are left as they are)."""
+    def rejoin(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> bool:
+        """Rejoin the plan from the measured state at sample ``k`` (robot mode's hand-back from
+        a fallback): from ``k`` on the set point starts at ``position`` and ``velocity`` and
+        reaches the plan, hold or motion, over ``duration`` s (:class:`Rejoin`), on the plan's
+        own timing; queued goals start after it. False before the first sample (no plan yet)."""
         ff = self.feedforward
-        if ff is None or self.queued or k < ff.end_k():
+        if ff is None:
             return False
-        hold = ff.trajectory.sample(ff.trajectory.duration)[0]
-        ff.set_trajectory(Quintic(np.asarray(position, dtype=float), hold, duration), k)
+        t0 = (k - ff.start_k) * self.period
+        ff.set_trajectory(Rejoin(ff.trajectory, t0, position, velocity, duration), k)
         return True
 
     # -- samples --------------------------------------------------------------------------------

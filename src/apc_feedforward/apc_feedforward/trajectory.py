@@ -13,6 +13,7 @@ is :class:`apc_feedforward.four_three_four.FourThreeFour`, on the base classes h
   accelerations.
 * :class:`Waypoints` -- quintic segments through the points of a
   ``trajectory_msgs/JointTrajectory`` goal.
+* :class:`Rejoin` -- a trajectory from one of its times on, approached from a state off it.
 
 Units are SI throughout: s, rad, rad/s, rad/s².  Every sampler holds the start point before
 ``t = 0`` and the final point from ``t = duration`` on, with zero velocity and acceleration.
@@ -29,6 +30,7 @@ from scipy.interpolate import BPoly, PPoly
 __all__ = [
     "PiecewisePolynomial",
     "Quintic",
+    "Rejoin",
     "Trajectory",
     "TrajectoryError",
     "Waypoints",
@@ -480,3 +482,49 @@ class Waypoints(PiecewisePolynomial):
         mean = 0.5 * (left + right)
         V[1:-1] = np.where(same_sign, np.sign(mean) * np.minimum(np.abs(mean), limit), 0.0)
         return V
+
+
+class Rejoin(Trajectory):
+    """``base`` from its time ``t0`` on, rejoined from a state off it: robot mode's hand-back.
+
+    The set point starts at the measured state (``q0``, ``qd0``) and its offset from ``base``
+    decays to zero over ``duration`` s as a quintic that ends at rest (zero offset, offset
+    velocity and offset acceleration), so a law taking over mid-motion starts at zero error and
+    the plan keeps its timing: ``q(tau) = base(t0 + tau) + e(tau)`` with ``e(0) = q0 -
+    base(t0)``, ``e'(0) = qd0 - base'(t0)``, ``e''(0) = 0``. It lasts until ``base`` ends or
+    the offset has gone, whichever is later; before ``tau = 0`` it holds its start at rest.
+
+    Raises
+    ------
+    TrajectoryError
+        On a shape mismatch, non-finite values, a ``t0`` that is not finite or ``duration <= 0``.
+    """
+
+    def __init__(
+        self, base: Trajectory, t0: float, q0: ArrayLike, qd0: ArrayLike, duration: float
+    ) -> None:
+        n = base.n_joints
+        q0_v, qd0_v = _as_vector("q0", q0, n), _as_vector("qd0", qd0, n)
+        while isinstance(base, Rejoin) and t0 >= base._offset.duration:
+            base, t0 = base._base, base._t0 + t0  # an earlier rejoin that has ended: its plan
+        q_b, qd_b, _ = base.sample(t0)
+        self._base = base
+        self._t0 = float(t0)
+        self._offset = Quintic(q0_v - q_b, np.zeros(n), duration, qd0=qd0_v - qd_b)
+        self._q_start = _readonly(q0_v)
+        self.n_joints = n
+        self.duration = max(self._offset.duration, base.duration - self._t0)
+
+    def sample_many(self, t: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Sample at the times ``t`` (s from the rejoin's start); see :meth:`Trajectory.sample`."""
+        t_arr = _as_float_array("t", t)
+        if t_arr.ndim != 1:
+            raise TrajectoryError(f"t: must be a 1-D array, got shape {t_arr.shape}")
+        q, qd, qdd = self._base.sample_many(self._t0 + t_arr)
+        e, ed, edd = self._offset.sample_many(t_arr)
+        q, qd, qdd = q + e, qd + ed, qdd + edd
+        before = t_arr < 0.0
+        q[before] = self._q_start
+        qd[before] = 0.0
+        qdd[before] = 0.0
+        return q, qd, qdd

@@ -237,22 +237,59 @@ def test_a_restart_drops_plan_and_goals_and_holds_the_position_measured_then(rob
     assert fresh.first_goal is not None
 
 
-def test_a_hold_is_approached_again_from_where_the_arm_is(robot):
-    """Robot mode's hand-back from a fallback: the set point starts where the arm sagged to and
-    reaches the hold at rest after ``duration``; a motion under way or goals queued are kept."""
+def test_a_hold_is_rejoined_from_where_the_arm_is(robot):
+    """Robot mode's hand-back from a fallback during a hold: the set point starts where the arm
+    sagged to and reaches the hold at rest after ``duration``."""
     q = queue(robot)
+    assert not q.rejoin(0, Q0, np.zeros(3), 0.5)  # no plan before the first sample
     q.sample(0, Q0, keep)  # holding Q0
     sagged = Q0 + np.deg2rad([0.0, -1.0, -3.9])
-    assert q.approach_hold(50, sagged, 0.5)
+    assert q.rejoin(50, sagged, np.zeros(3), 0.5)
     start, end = q.sample(50, Q0, keep).setpoint, q.sample(100, Q0, keep).setpoint
     np.testing.assert_allclose(start.q, sagged, atol=1e-12)
     np.testing.assert_allclose(end.q, Q0, atol=1e-12)
     assert_array_equal(start.qd, np.zeros(3))
+    assert_array_equal(end.qd, np.zeros(3))
     assert_array_equal(q.sample(130, Q0, keep).setpoint.q, end.q)
-    moving = queue(robot, first_goal=Q0 + 0.2)
-    moving.sample(0, Q0, keep)  # the first move under way
-    assert not moving.approach_hold(10, sagged, 0.5)
-    queued = queue(robot)
-    queued.sample(0, Q0, keep)
-    queued.add(goal([0.5], [Q0 - 0.1]))
-    assert not queued.approach_hold(10, sagged, 0.5)
+
+
+def test_a_motion_is_rejoined_on_its_own_timing(robot):
+    """A hand-back during a move: the set point starts at the measured state and meets the plan
+    after ``duration`` on the plan's timing (the move is not restarted); a goal queued behind it
+    starts when the move and the rejoin have both ended, from the move's end."""
+    target = Q0 + np.deg2rad([30.0, -20.0, 10.0])
+    plain, q = queue(robot, first_goal=target), queue(robot, first_goal=target)
+    for k in range(41):
+        plain.sample(k, Q0, keep)
+        q.sample(k, Q0, keep)
+    back = Q0 - 0.1
+    q.add(goal([0.5], [back]))
+    ref = plain.sample(40, Q0, keep).setpoint  # mid-move: 0.4 s of 1 s
+    assert np.all(ref.qd != 0.0)
+    off_q, off_qd = ref.q + np.deg2rad([2.0, -1.0, 0.5]), ref.qd + 0.1
+    assert q.rejoin(40, off_q, off_qd, 0.3)
+    first, near = q.sample(41, Q0, keep).setpoint, plain.sample(41, Q0, keep).setpoint
+    np.testing.assert_allclose(first.q, off_q + T * off_qd, atol=1e-4)  # from the state
+    np.testing.assert_allclose(first.q - near.q, off_q - ref.q + T * 0.1, atol=1e-4)
+    assert first.t == pytest.approx(T)
+    for k in range(70, 100):  # after duration: the plan's own set points
+        a, b = q.sample(k, Q0, keep).setpoint, plain.sample(k, Q0, keep).setpoint
+        np.testing.assert_allclose(a.q, b.q, atol=1e-12)
+        np.testing.assert_allclose(a.qd, b.qd, atol=1e-12)
+        np.testing.assert_allclose(a.u_n, b.u_n, atol=1e-9)
+    assert plain.feedforward.end_k() == 100
+    assert q.feedforward.end_k() == 100  # the rejoin ended before the move
+    assert_array_equal(q.sample(100, Q0, keep).setpoint.q, target)  # the goal starts there
+    np.testing.assert_allclose(q.sample(150, Q0, keep).setpoint.q, back, atol=1e-12)
+
+
+def test_rejoins_do_not_pile_up(robot):
+    """A rejoin of a rejoin that has ended rejoins the plan beneath it (hand-backs over an hour
+    do not nest without bound)."""
+    q = queue(robot)
+    q.sample(0, Q0, keep)
+    for k in (100, 200, 300):
+        assert q.rejoin(k, Q0 + 0.01, np.zeros(3), 0.5)
+        q.sample(k + 1, Q0, keep)
+    base = q.feedforward.trajectory._base
+    assert not isinstance(base, type(q.feedforward.trajectory))

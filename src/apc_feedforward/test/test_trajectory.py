@@ -10,6 +10,7 @@ from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.trajectory import (
     PiecewisePolynomial,
     Quintic,
+    Rejoin,
     TrajectoryError,
     Waypoints,
 )
@@ -389,3 +390,30 @@ def test_feedforward_block_sampling_equals_sampling_each_time(paper: FourThreeFo
     ff.set_trajectory(second, 12)
     for k in range(12, 40):
         np.testing.assert_array_equal(ff.sample(k).q, second.sample((k - 12) * 0.01)[0])
+
+
+def test_rejoin_starts_at_the_state_and_ends_on_the_plan():
+    """Rejoin: at 0 the given state, velocity and acceleration the derivatives of position
+    (checked by differences), the base's own values once the offset has gone, its end held."""
+    base = Quintic([0.0, 1.0], [1.0, -1.0], 2.0)
+    q0, qd0 = np.array([0.3, 0.9]), np.array([1.0, -0.5])
+    r = Rejoin(base, 0.5, q0, qd0, 0.4)
+    assert r.duration == pytest.approx(1.5)
+    q, qd, qdd = r.sample(0.0)
+    np.testing.assert_allclose(q, q0, atol=1e-12)
+    np.testing.assert_allclose(qd, qd0, atol=1e-12)
+    np.testing.assert_allclose(qdd, base.sample(0.5)[2], atol=1e-9)
+    t = np.linspace(0.0, 1.5, 3001)
+    q, qd, qdd = r.sample_many(t)
+    smooth = np.abs(t - 0.4) > 1e-3  # the jerk steps where the offset ends
+    smooth[[0, -1]] = False
+    np.testing.assert_allclose(np.gradient(q, t, axis=0)[smooth], qd[smooth], atol=2e-5)
+    np.testing.assert_allclose(np.gradient(qd, t, axis=0)[smooth], qdd[smooth], atol=2e-3)
+    after = t >= 0.4
+    for mine, theirs in zip((q, qd, qdd), base.sample_many(t[after] + 0.5), strict=True):
+        np.testing.assert_allclose(mine[after], theirs, atol=1e-12)
+    np.testing.assert_array_equal(r.sample(5.0)[0], [1.0, -1.0])
+    np.testing.assert_array_equal(r.sample(-1.0)[0], q0)
+    short = Rejoin(base, 1.9, q0, qd0, 0.4)  # the offset outlasts the plan
+    assert short.duration == pytest.approx(0.4)
+    np.testing.assert_allclose(short.sample(0.4)[0], [1.0, -1.0], atol=1e-12)
