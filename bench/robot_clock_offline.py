@@ -19,10 +19,13 @@ reports the median and the worst run's max error over the joints, the worst fina
 (deg, at the samples), the runs beyond :data:`apc_lab.wall_clock.LOST_DEG` ("lost", the
 wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
 
-    .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize] [--json FILE]
+    .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
+        [--ideal-velocity] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
+``--ideal-velocity``: the ideal arm's driver publishes the arm's exact velocity as well (what
+``robot_sim`` does by default), instead of positions only.
 """
 
 from __future__ import annotations
@@ -60,6 +63,7 @@ def one_run(
     index: int,
     supervisor: SupervisorConfig | None,
     settings: dict | None = None,
+    ideal_velocity: bool = False,
 ) -> dict:
     """Run ``index`` of a cell: max and final error per joint (deg), hand-overs."""
     scenario = arm_scenario(arm, "c")
@@ -76,6 +80,7 @@ def one_run(
         effects=ARM_EFFECTS[arm]() if effects == "physical" else None,
         arm=scenario,
         settings=settings,
+        velocity=True if ideal_velocity else None,
     )
     errors = run.tracking_error_deg()
     return {
@@ -85,9 +90,11 @@ def one_run(
     }
 
 
-def measure(arms: tuple[str, ...] = ARMS, settings: dict | None = None) -> list[dict]:
+def measure(
+    arms: tuple[str, ...] = ARMS, settings: dict | None = None, ideal_velocity: bool = False
+) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
-    preset)."""
+    preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -95,7 +102,9 @@ def measure(arms: tuple[str, ...] = ARMS, settings: dict | None = None) -> list[
                 for late in (False, True):
                     for law, supervisor in LAWS.items():
                         runs = [
-                            one_run(arm, effects, rate, late, i, supervisor, settings)
+                            one_run(
+                                arm, effects, rate, late, i, supervisor, settings, ideal_velocity
+                            )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
                         worst = [max(r["max_deg"]) for r in runs]
@@ -163,13 +172,23 @@ def main() -> None:
         action="store_true",
         help="the recommended preset with the paper's prior (Eq. 33 at the first set point)",
     )
+    parser.add_argument(
+        "--ideal-velocity",
+        action="store_true",
+        help="the ideal arm's states carry its exact velocity (a driver that publishes one)",
+    )
     args = parser.parse_args()
     settings = {**recommended_settings(), "relinearize": False} if args.no_relinearize else None
-    cells = measure(tuple(args.arms), settings)
+    cells = measure(tuple(args.arms), settings, args.ideal_velocity)
     print()
     print(markdown(cells), end="")
     if args.json:
-        doc = {"simulated_time": True, "relinearize": not args.no_relinearize, "cells": cells}
+        doc = {
+            "simulated_time": True,
+            "relinearize": not args.no_relinearize,
+            "ideal_velocity": args.ideal_velocity,
+            "cells": cells,
+        }
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
 
 

@@ -120,6 +120,7 @@ def run_robot_loop(
     setup: Callable[[RobotLoop], object] | None = None,
     effects: ArmEffects | None = None,
     arm: Scenario | None = None,
+    velocity: bool | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -160,6 +161,9 @@ def run_robot_loop(
         Another arm: its URDF, locked joints, payload frame, the controllers' inertia error and
         the start pose (``q_start_deg``); its payload comes from ``payload_kg``. Default: the
         3-joint PUMA 560 at the paper's start pose, 10 % inertia error.
+    velocity : bool, optional
+        Whether the states carry a velocity (the ideal arm's exact one, a physical arm's
+        drive's); default: a physical arm's do, the ideal arm's do not.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -193,7 +197,7 @@ def run_robot_loop(
             state_rate=1e9 / dt,
             command_timeout=duration_s + 1.0,
             command_joints=command_joints,
-            publish_velocity=effects is not None,
+            publish_velocity=effects is not None if velocity is None else velocity,
             publish_effort=False,
             sensing=effects if effects is not None else ArmEffects(),
         ),

@@ -286,7 +286,12 @@ def controller_arguments(arm: str, law: str) -> list[str]:
 
 
 def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, Any]:
-    """robot_sim's parameters: robot_compare's case (c) for the arm on wall time at ``rate_hz``."""
+    """robot_sim's parameters: robot_compare's case (c) for the arm on wall time at ``rate_hz``.
+
+    The ideal arm publishes positions only, as a joint_state_broadcaster over hardware without
+    a velocity state interface (the issue's driver, and the offline grid's ideal arm,
+    ``bench/robot_clock_offline.py``); the physical presets publish their drive's velocity.
+    """
     from apc_lab import robot_compare as rc
 
     case = rc.RobotCase(arm, "c", effects, "computed torque", timing="realtime")
@@ -297,5 +302,6 @@ def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, An
         sim_time=False,
         command_latency=0.0,  # wall time: the transport is real
         sim_cycles_per_command=round(rate_hz * period),
+        publish_velocity=effects != "ideal",
     )
     return params

@@ -224,6 +224,8 @@ def test_robot_sim_runs_case_c_on_wall_time_at_the_cells_rate():
     panda = wall_clock.robot_sim_parameters("panda", "ideal", 1000.0)
     assert panda["effects"] == "ideal" and panda["state_rate"] == 1000.0
     assert panda["sim_cycles_per_command"] == 10
+    # the ideal arm's driver publishes positions only, as the offline grid's; a drive its own
+    assert panda["publish_velocity"] is False and puma["publish_velocity"] is True
 
 
 def test_a_missed_sample_at_the_moves_end_leaves_the_final_error_at_the_one_before():
