@@ -205,6 +205,37 @@ class DriverConfig:
         return period - offset if 2 * offset <= period else 2 * period - offset
 
 
+class WallCycles:
+    """Which driver cycles a wall timer's callback at ``now`` stands for.
+
+    A robot's driver reads and writes on its cycle's instant (a real-time loop; the arm moves
+    in real time between); a timer's callback on a loaded machine runs late by the executor's
+    latency, now and then by more than a period. The callback stands for every cycle due since
+    the one before, the newest at or before ``now`` (the instants ``phase + i / state_rate``):
+    each is integrated for one period, the newest's state published stamped at its instant.
+    So a state's stamp is the instant its physics is at, and a command that arrives after that
+    instant is applied at the next cycle, as a driver's write at the instant would. Stamped at
+    the callback instead, the states carried the callback's jitter (up to a third of a period
+    at 1 kHz) in their stamps while the arm had moved exactly one period: a velocity estimated
+    from positions and stamps took that jitter as motion.
+    """
+
+    def __init__(self, config: DriverConfig) -> None:
+        self._config = config
+        self._last: int | None = None
+
+    def due(self, now_ns: int) -> range:
+        """The cycles (indices) the callback at ``now_ns`` (system clock) runs, oldest first:
+        the newest due at or before ``now_ns`` and any the callbacks before it left; one (the
+        next) for a callback that runs before its instant."""
+        config = self._config
+        newest = (now_ns - config.phase_ns) // config.period_ns
+        last = newest - 1 if self._last is None else self._last
+        newest = max(newest, last + 1)
+        self._last = newest
+        return range(last + 1, newest + 1)
+
+
 @dataclass(frozen=True, eq=False)
 class Reading:
     """One joint state as ``joint_state_broadcaster`` publishes it (published order)."""

@@ -14,10 +14,12 @@ velocity, a command delay); ``ideal`` turns them all off.
 
 Time
 ----
-``sim_time: false`` (default): a wall timer runs the loop at ``state_rate``; stamps are the
-node's clock (system time). ``sim_time: true``: the node owns time, publishes ``/clock`` and
-steps as fast as the controllers answer, the way Gazebo or MuJoCo are run with
-``use_sim_time``: after publishing the state at ``t`` it waits for a command received after
+``sim_time: false`` (default): a wall timer runs the loop at ``state_rate``; each state is
+stamped with its cycle's instant on the node's clock (system time), the instant its physics is
+at, and a callback that runs late runs the cycles it stands for
+(:class:`apc_plant_sim.robot_driver.WallCycles`). ``sim_time: true``: the node owns time,
+publishes ``/clock`` and steps as fast as the controllers answer, the way Gazebo or MuJoCo are
+run with ``use_sim_time``: after publishing the state at ``t`` it waits for a command received after
 that state (or ``sim_wait_s`` of wall time) before it integrates to ``t + 1/state_rate``.
 Controllers slower than the driver (``state_rate`` = 500 Hz, T = 10 ms) answer every
 ``sim_cycles_per_command`` cycles; the cycles in between step without waiting. Before the first
@@ -74,7 +76,13 @@ from apc_plant_sim.engines import (
 )
 from apc_plant_sim.mujoco_engine import INTEGRATORS
 from apc_plant_sim.node import DERIVED as PLANT_DERIVED
-from apc_plant_sim.robot_driver import DriverConfig, DriverError, Reading, RobotDriver
+from apc_plant_sim.robot_driver import (
+    DriverConfig,
+    DriverError,
+    Reading,
+    RobotDriver,
+    WallCycles,
+)
 from apc_plant_sim.true_arm import TRUE_ARM_PARAMS, payload_from_params
 
 #: Where ros2_control's ``joint_state_broadcaster`` publishes (``use_local_topics: false``).
@@ -341,6 +349,7 @@ class RobotSimNode(Node):
             tick = guarded(self, self.diagnostics, "sim_wait", self._sim_watch)
             self._timer = self.create_timer(min(self._sim_wait_s, 0.01), tick, clock=self._wall)
         else:
+            self._wall_cycles = WallCycles(config)
             tick = guarded(self, self.diagnostics, "cycle", self._wall_cycle)
             self._timer = self.create_timer(config.period, tick, clock=self._wall)
 
@@ -445,9 +454,14 @@ class RobotSimNode(Node):
     def _wall_cycle(self) -> None:
         if not self.context.ok():  # a signal between the timer's wake-up and this call
             return
-        now = self._now()
+        config = self.driver.config
+        cycles = self._wall_cycles.due(self.get_clock().now().nanoseconds)
         if self._start is None:
-            self._start = now
+            self._start = config.cycle_time_ns(cycles[0]) / wire.NS_PER_S
+        for i in cycles[:-1]:  # cycles the callbacks missed: the arm moved, no state went out
+            self.diagnostics.count("unpublished_cycles")
+            self._cycle(config.cycle_time_ns(i) / wire.NS_PER_S)
+        now = config.cycle_time_ns(cycles[-1]) / wire.NS_PER_S
         self._publish(self.driver.measure(now))  # read() -> joint_state_broadcaster
         self._cycle(now)
         self._keep_phase()
@@ -459,7 +473,7 @@ class RobotSimNode(Node):
         due time (not after its callback), so one shortened or lengthened interval puts them on
         the phase: at the first cycles, and again if the clocks drift apart by more than
         :data:`WALL_PHASE_TOLERANCE` of a period. Best effort: callbacks run late by the
-        executor's latency, and the stamps are the time each one runs.
+        executor's latency; the stamps are the cycles' instants all the same (``WallCycles``).
         """
         config = self.driver.config
         if self._timer.timer_period_ns != config.period_ns:

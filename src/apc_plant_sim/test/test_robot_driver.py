@@ -10,7 +10,7 @@ from apc_core.robot import Payload, load_robot, with_payload
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import PinocchioEngine
 from apc_plant_sim.plant import Plant, PlantConfig
-from apc_plant_sim.robot_driver import DriverConfig, DriverError, RobotDriver
+from apc_plant_sim.robot_driver import DriverConfig, DriverError, RobotDriver, WallCycles
 
 NAMES = ("joint_1", "joint_2", "joint_3")
 
@@ -420,3 +420,17 @@ def test_aligning_interval_puts_the_cycle_after_the_next_on_the_phase(next_cycle
     config = DriverConfig(state_rate=500.0, phase=0.0007)
     assert config.aligning_interval_ns(next_cycle_ns, tolerance_ns=20_000) == interval_ns
     assert (next_cycle_ns + interval_ns - 700_000) % 2_000_000 in (0, 10_000)
+
+
+def test_a_wall_timers_callback_stands_for_the_cycles_due_since_the_last_one():
+    """On wall time each state is stamped with its cycle's instant, not the callback's: a late
+    callback (jitter) runs its own cycle, one more than a period late runs the missed one too,
+    an early one runs the next cycle, never one twice."""
+    config = DriverConfig(state_rate=1000.0, phase=0.0003)
+    cycles = WallCycles(config)
+    base = 5_000_000 * config.period_ns + config.phase_ns  # cycle 5e6's instant
+    assert list(cycles.due(base + 400_000)) == [5_000_000]  # 0.4 ms late: its own cycle
+    assert list(cycles.due(base + 1_000_000)) == [5_000_001]  # on time
+    assert list(cycles.due(base + 3_700_000)) == [5_000_002, 5_000_003]  # one missed
+    assert list(cycles.due(base + 3_900_000)) == [5_000_004]  # early: the next, not 3 again
+    assert config.cycle_time_ns(5_000_003) == base + 3_000_000
