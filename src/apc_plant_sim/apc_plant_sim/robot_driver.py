@@ -212,12 +212,13 @@ class WallCycles:
     in real time between); a timer's callback on a loaded machine runs late by the executor's
     latency, now and then by more than a period. The callback stands for every cycle due since
     the one before, the newest at or before ``now`` (the instants ``phase + i / state_rate``):
-    each is integrated for one period, the newest's state published stamped at its instant.
-    So a state's stamp is the instant its physics is at, and a command that arrives after that
-    instant is applied at the next cycle, as a driver's write at the instant would. Stamped at
-    the callback instead, the states carried the callback's jitter (up to a third of a period
-    at 1 kHz) in their stamps while the arm had moved exactly one period: a velocity estimated
-    from positions and stamps took that jitter as motion.
+    each is integrated for one period, the newest's state published stamped at its instant:
+    the instant its physics is at. Stamped at the callback instead, the states carried the
+    callback's jitter (up to a third of a period at 1 kHz) in their stamps while the arm had
+    moved exactly one period: a velocity estimated from positions and stamps took that jitter
+    as motion. The newest cycle's write takes the commands that arrived before the callback
+    ran (robot_sim): a real driver publishes at its instant, so the timer's own latency is
+    not charged to the loop's transport.
     """
 
     def __init__(self, config: DriverConfig) -> None:

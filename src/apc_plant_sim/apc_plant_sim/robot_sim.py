@@ -455,15 +455,18 @@ class RobotSimNode(Node):
         if not self.context.ok():  # a signal between the timer's wake-up and this call
             return
         config = self.driver.config
-        cycles = self._wall_cycles.due(self.get_clock().now().nanoseconds)
+        now_ns = self.get_clock().now().nanoseconds
+        cycles = self._wall_cycles.due(now_ns)
         if self._start is None:
             self._start = config.cycle_time_ns(cycles[0]) / wire.NS_PER_S
         for i in cycles[:-1]:  # cycles the callbacks missed: the arm moved, no state went out
             self.diagnostics.count("unpublished_cycles")
             self._cycle(config.cycle_time_ns(i) / wire.NS_PER_S)
-        now = config.cycle_time_ns(cycles[-1]) / wire.NS_PER_S
-        self._publish(self.driver.measure(now))  # read() -> joint_state_broadcaster
-        self._cycle(now)
+        instant = config.cycle_time_ns(cycles[-1]) / wire.NS_PER_S
+        self._publish(self.driver.measure(instant))  # read() -> joint_state_broadcaster
+        # The write takes what arrived before the callback runs: the timer's own latency is
+        # the simulator's, not the transport's, and a real driver publishes at its instant.
+        self._cycle(now_ns / wire.NS_PER_S)
         self._keep_phase()
 
     def _keep_phase(self) -> None:
