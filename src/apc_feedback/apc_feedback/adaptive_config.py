@@ -116,6 +116,16 @@ class AdaptiveConfig:
         ``k`` (rad/s): a dead zone for a joint that sticks (Coulomb friction), through which
         a torque moves nothing and the identifier would learn ``Ĝ_ii -> 0``, and the optimal
         control ``~ Ĝ⁻¹`` command the torque limit. 0 (default): always identify (the paper).
+    q_input_change : float
+        Weight of the planned input's change from one step of the horizon to the next, on the
+        velocity it makes: ``q_input_change |Ĝv (δu(j) - δu(j-1))|²``, ``Ĝv`` the velocity
+        block of the identified input matrix summed over the lags (≈ T D⁻¹), in the units of
+        ``q_velocity``: generalised predictive control's move suppression. With two input
+        lags or more (the planned state then holds the last two inputs); settable at run
+        time. Sampled positions do not see an input alternating from sample to sample (the
+        zero-order hold's sampling zero at z = -1), and without this weight the receding
+        horizon's cheap position weight leaves the law's own inputs ringing at the Nyquist
+        frequency (:mod:`apc_feedback.lagged_control`). 0 (default): none (the paper).
     """
 
     period: float = PAPER_PERIOD_S
@@ -202,6 +212,13 @@ class AdaptiveConfig:
     )
     identify_min_speed: float = setting(
         0.0, "no identification step while a joint is slower than this (rad/s); 0 = off", 0.0, 1e3
+    )
+    q_input_change: float = setting(
+        0.0,
+        "weight of the planned torque's change per sample, on the velocity it makes (2+ lags)",
+        0.0,
+        1e12,
+        runtime=True,
     )
 
     def __post_init__(self) -> None:

@@ -27,16 +27,13 @@ import pinocchio as pin
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
+from apc_feedback.lagged_control import receding_controller, weigh_input_change
 from apc_feedback.linearize import (
     SetpointLinearization,
     VelocityStencil,
     initial_model,
 )
-from apc_feedback.optimal import (
-    OneStepControl,
-    RecedingHorizonControl,
-    validate_weights,
-)
+from apc_feedback.optimal import OneStepControl, validate_weights
 from apc_feedback.rls import Rls, RlsError
 
 #: With ``relinearize``, ``project_g`` refuses an identification step that would leave a
@@ -201,7 +198,8 @@ class AdaptiveFeedback(FeedbackLaw):
         validate_weights(Q, R, 2 * n, n)
         self.config, self.Q, self.R = config, Q, R
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
-        self._receding = _receding_controller(config, q_diagonal, R, n)
+        self._receding = receding_controller(config, q_diagonal, R, n)
+        self._change_weight = np.zeros((n, n))
         self._identify_applied = config.identify_with == "applied"
 
     @property
@@ -209,8 +207,9 @@ class AdaptiveFeedback(FeedbackLaw):
         return self.config
 
     def reconfigure(self, config: AdaptiveConfig) -> None:
-        """Take new weights (``q_position``, ``q_velocity``, ``r``) at the next sample and keep
-        what was identified; the identifier's own settings cannot change while it runs.
+        """Take new weights (``q_position``, ``q_velocity``, ``r``, ``q_input_change``) at the
+        next sample and keep what was identified; the identifier's own settings cannot change
+        while it runs.
 
         Raises
         ------
@@ -486,7 +485,9 @@ class AdaptiveFeedback(FeedbackLaw):
         action the model is augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C selects
         the position rows). The identified blocks are written into the controller's model
         every sample; its constant entries (the lags' shift, the integral's identity) were
-        written once by :func:`_receding_controller`.
+        written once by :func:`apc_feedback.lagged_control.receding_controller`; with
+        ``q_input_change`` and two lags or more the weight of the input's change follows the
+        prior's input gain (:func:`apc_feedback.lagged_control.weigh_input_change`).
         """
         config, n = self.config, self.n_joints
         p, lags = 2 * n, config.input_lags
@@ -503,6 +504,9 @@ class AdaptiveFeedback(FeedbackLaw):
             F[:p, p:s] = model[:, p + n : p + n + lags * n]
             # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
             x[p:s] = self._z_du[: lags * n]
+            if lags >= 2 and config.q_input_change > 0.0:
+                gain, weight = self._velocity_gain(), config.q_input_change
+                weigh_input_change(control, gain, weight, self._change_weight)
         if config.q_integral > 0.0:
             T = config.period
             np.multiply(F[:n, :s], T, out=F[s:, :s])
@@ -566,31 +570,6 @@ class AdaptiveFeedback(FeedbackLaw):
             inputs[0] = self._du_prev
         self._inputs_known = min(self._inputs_known + 1, len(inputs))
         return self._inputs_known == len(inputs)
-
-
-def _receding_controller(
-    config: AdaptiveConfig, q_diagonal: np.ndarray, R: np.ndarray, n: int
-) -> RecedingHorizonControl | None:
-    """The receding-horizon controller of ``config``'s model (None: the one-step law of Eq. 35
-    does), with the model's constant entries written: the shift of the lagged inputs, the
-    decision entering as ``δu(k-1)`` one step on, the integral's identity. See
-    :meth:`AdaptiveFeedback._receding_control` for the state and the blocks written per sample.
-    """
-    lags, integral = config.input_lags, config.q_integral > 0.0
-    if lags == 0 and not integral and config.horizon == 1:
-        return None
-    p = 2 * n
-    s = p + lags * n
-    weights = [q_diagonal, np.zeros(lags * n)]
-    if integral:
-        weights.append(np.full(n, config.q_integral))
-    control = RecedingHorizonControl(np.concatenate(weights), R, config.horizon + lags)
-    if lags:
-        control.G[p : p + n] = np.eye(n)  # v = δu(k) is δu(k-1) one step on
-        control.F[p + n : s, p : s - n] = np.eye((lags - 1) * n)  # δu(k-j) -> δu(k-j-1)
-    if integral:
-        control.F[s:, s:] = np.eye(n)  # ξ(k+1) = ξ(k) + …
-    return control
 
 
 def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:

@@ -377,8 +377,8 @@ def receding_horizon_control(
 
 
 class RecedingHorizonControl:
-    """:func:`receding_horizon_control` for the per-sample loop: diagonal ``Q``, fixed horizon,
-    every array made once.
+    """:func:`receding_horizon_control` for the per-sample loop: ``Q`` diagonal as made (a
+    caller may weigh off the diagonal, :attr:`Q`), fixed horizon, every array made once.
 
     The augmented model ``A = [[F, w], [0, 1]]``, ``B = [[G], [0]]`` and ``Q̃ = diag(Q, 0)`` live
     in buffers whose constant entries are written here, once; the caller writes the model into
@@ -424,6 +424,10 @@ class RecedingHorizonControl:
         self.F, self.G, self.w = self._A[:p, :p], self._B[:p], self._A[:p, p]
         #: View the caller writes the state ``x`` (p,) into.
         self.x = self._s[:p]
+        #: View of ``Q`` (p, p), ``diag(q_diagonal)`` as made: a caller may write weights off
+        #: the diagonal into it (:func:`apc_feedback.lagged_control.weigh_input_change`), kept
+        #: symmetric positive semi-definite.
+        self.Q = self._Qt[:p, :p]
         # The recursion's products.
         self._P = np.empty((p + 1, p + 1))
         self._PA = np.empty((p + 1, p + 1))

@@ -48,8 +48,12 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     alone: F̂ and Ĝ start from Eq. 33 with ``P(0) = 1e-3`` (``alpha_model``), so a sample
     moves them as far as ``alpha_model |δu|²`` against 1 allows (inputs of ~30 N m, a move or a
     payload, count; a hold's little): a late command on a hold, which robot mode starts every
-    activation with, must not move the model. Why these values and not others, measured:
-    docs/paper.md, "The model prior" and the preset sweep.
+    activation with, must not move the model. The input lags plan over the inputs on their
+    way, and ``q_input_change`` weighs the planned input's change on the velocity it makes, so
+    that the law does not keep its own inputs ringing at the Nyquist frequency, which sampled
+    positions do not see (:mod:`apc_feedback.lagged_control`). Why these values and not
+    others, measured: docs/paper.md, "The model prior" and the preset sweep; docs/robot.md,
+    "Commands ringing at the Nyquist frequency".
     """
     return {
         **paper_settings(alpha),
@@ -63,6 +67,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "alpha_model": 1e-3,
         "input_lags": 2,
         "relinearize": True,
+        "q_input_change": 0.003,
     }
 
 

@@ -377,18 +377,25 @@ def _lagged_model(law, dx):
     inputs = law._inputs[:lags].ravel()
     x = np.concatenate([dx, inputs, law.integral])
     Q = np.diag(np.concatenate([law.Q.diagonal(), np.zeros(lags * n), np.full(n, 1e6)]))
+    # The change of the planned input, weighed on the velocity it makes:
+    # q_input_change |Gv (δu(j) - δu(j-1))|², Gv the identified velocity block summed over lags.
+    Gv = law.identified_input_gain[n:]
+    S = law.config.q_input_change * (Gv.T @ Gv)
+    change = np.kron(np.array([[1.0, -1.0], [-1.0, 1.0]]), S)
+    Q[p : p + 2 * n, p : p + 2 * n] += change
     return F, G, w, Q, x
 
 
 def test_recommended_law_controls_its_lagged_integral_model(controller_robot):
     """The recommended preset's du is the receding-horizon control of the lagged model with
-    the integral, built afresh from the estimate (the law writes only the identified blocks
-    into its buffers every sample, the constant ones once)."""
+    the integral and the weight of the input's change, built afresh from the estimate (the law
+    writes only the identified blocks and that weight into its buffers every sample, the
+    constant ones once)."""
     from apc_feedback.presets import recommended_settings
 
     model = controller_robot.model
     config = AdaptiveConfig.from_dict({**recommended_settings(), "period": 0.01})
-    assert config.input_lags == 2 and config.q_integral == 1e6
+    assert config.input_lags == 2 and config.q_integral == 1e6 and config.q_input_change > 0
     law = AdaptiveFeedback(model, config)
     data = model.createData()
     applied = None
