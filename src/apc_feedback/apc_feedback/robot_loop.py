@@ -422,10 +422,13 @@ class RobotLoop:
             if supervisor.update(k, error, error_qd, self.law, None, False) is None:
                 return backup
             approach = supervisor.config.approach_time
-            # The set point of the law's first sample is the state the fallback left (starting
-            # from the state extrapolated to that sample tripped the law again on a 100 Hz
-            # driver with every command a period late, test_supervisor).
-            if approach > 0.0 and self.plan.rejoin(k + 1, args[1], args[2], approach):
+            # The rejoin starts at this sample's measured state, so the law's first set point,
+            # a sample on, is where the arm is then: anchored a sample later, at the state
+            # itself, it trailed a moving arm by a sample's motion (1.3 deg on the paper's move
+            # through robot_sim). Before the planned input's change was weighed
+            # (q_input_change), the anchored start re-tripped the law on a 100 Hz driver with
+            # every command a period late (test_supervisor); with it, it holds.
+            if approach > 0.0 and self.plan.rejoin(k, args[1], args[2], approach):
                 self.count("supervisor.handbacks")
                 self.log(
                     "info",
