@@ -487,7 +487,7 @@ class AdaptiveFeedback(FeedbackLaw):
         every sample; its constant entries (the lags' shift, the integral's identity) were
         written once by :func:`apc_feedback.lagged_control.receding_controller`; with
         ``q_input_change`` and two lags or more the weight of the input's change follows the
-        prior's input gain (:func:`apc_feedback.lagged_control.weigh_input_change`).
+        identified input gain (:func:`apc_feedback.lagged_control.weigh_input_change`).
         """
         config, n = self.config, self.n_joints
         p, lags = 2 * n, config.input_lags
