@@ -1,0 +1,186 @@
+"""What loses a physical arm on a slow driver: one effect at a time, and what telling helps.
+
+The offline grid (``bench/robot_clock_offline.py``) loses the physical PUMA at 100 Hz and the
+physical Panda at 100 and 250 Hz with the recommended preset alone, and the supervised runs
+there hand over. This bench takes those drivers apart, **simulated time**, robot mode's loop
+closed offline (:func:`apc_lab.robot_offline.run_robot_loop`, no ROS), the arms and move of
+the grid (5 lb the controllers do not know, 10 % inertia error, case (c)'s move), commands on
+time, the adaptive law **alone** (no supervisor: what is measured is the law):
+
+- **effects**: the arm in MuJoCo with none of ``robot_sim``'s effects (its exact velocity
+  published), each effect of the arm's preset alone (``effects: puma560`` / ``panda``), and all
+  of them (``physical``, the grid's physical arm);
+- **variants** of the law, each told or changed one thing:
+
+  - ``shipped``: robot mode as it is: the prior splits the input by one driver period
+    (``delay`` candidates one and two periods, chosen at a restart), a published velocity
+    taken as the arm's;
+  - ``told``: told what the driver does, from the start: the delay (two driver periods where
+    the drive adds a cycle) and, where the drive differences its positions, that the velocity
+    is ``(q(t) - q(t - Td)) / Td`` (the stencil robot mode tells for its own estimate);
+  - ``held``: as shipped, the model held at its prior (``alpha_model`` 1e-12: Eq. 33 at each
+    set point, nothing identified but the bias ŵ);
+  - ``told, held``: both.
+
+Five runs per cell, the payload within ±1 % (the grid's :data:`PAYLOAD_FACTORS`: a physical
+arm's run is chaotic in its inputs). Per cell: the median over the runs of the worst joint's
+max error, the worst run's max / final error (deg) and the runs lost (beyond
+:data:`apc_lab.wall_clock.LOST_DEG`). About three minutes on one core.
+
+    .venv/bin/python bench/slow_driver_effects.py [--arms puma3 panda] [--rates 100 250]
+        [--json bench/slow_driver_effects.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from robot_clock_offline import PAYLOAD_FACTORS
+
+from apc_feedback.linearize import VelocityStencil
+from apc_feedback.presets import recommended_settings
+from apc_feedback.robot_loop import RobotLoop
+from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
+from apc_lab.robot_offline import run_robot_loop
+from apc_lab.wall_clock import LOST_DEG
+from apc_plant_sim.effects import EFFECT_FIELDS, ArmEffects, single_effect
+
+ARMS = ("puma3", "panda")
+RATES_HZ = (100, 250)
+VARIANTS = ("shipped", "told", "held", "told, held")
+#: ``alpha_model`` that holds the model at its prior (nothing but the bias is identified).
+HELD_ALPHA_MODEL = 1e-12
+
+
+def effects_of(arm: str) -> dict[str, ArmEffects]:
+    """``none``, each effect the arm's preset has alone, and ``physical`` (all of them)."""
+    full, none = ARM_EFFECTS[arm](), ArmEffects()
+    out = {"none": none}
+    for name, fields in EFFECT_FIELDS.items():
+        if any(getattr(full, f) != getattr(none, f) for f in fields):
+            out[name] = single_effect(name, full)
+    out["physical"] = full
+    return out
+
+
+def tell(effects: ArmEffects, driver_period: float):
+    """``setup`` for :func:`run_robot_loop`: the law told the driver's delay and velocity."""
+    periods = 1 + effects.command_delay
+    difference = effects.velocity == "difference"
+
+    def setup(loop: RobotLoop) -> None:
+        law = loop.law
+        expect_delay, expect_stencil = law.expect_input_delay, law.expect_velocity_stencil
+
+        def expect_input_delay(seconds: float, candidates=()) -> None:
+            expect_delay(periods * driver_period, ())
+
+        def expect_velocity_stencil(stencil: VelocityStencil | None) -> None:
+            if stencil is None and difference:
+                stencil = VelocityStencil(
+                    (0.0, driver_period), (1.0 / driver_period, -1.0 / driver_period)
+                )
+            expect_stencil(stencil)
+
+        law.expect_input_delay = expect_input_delay
+        law.expect_velocity_stencil = expect_velocity_stencil
+
+    return setup
+
+
+def one_cell(arm: str, rate_hz: int, effects: ArmEffects, variant: str) -> dict:
+    scenario = arm_scenario(arm, "c")
+    driver_ms = 1000.0 / rate_hz
+    settings = recommended_settings()
+    if "held" in variant:
+        settings["alpha_model"] = HELD_ALPHA_MODEL
+    worst, final = [], []
+    for factor in PAYLOAD_FACTORS:
+        run = run_robot_loop(
+            2.5,
+            goal_deg=scenario.q_goal_deg,
+            driver_ms=driver_ms,
+            phase_ms=0.37 * driver_ms,
+            transport_ms=0.3 * min(1.0, driver_ms),
+            payload_kg=scenario.payload_kg * factor,
+            effects=effects,
+            arm=scenario,
+            settings=settings,
+            setup=tell(effects, driver_ms * 1e-3) if "told" in variant else None,
+        )
+        errors = run.tracking_error_deg()
+        worst.append(float(errors.max()) if np.all(np.isfinite(errors)) else float("inf"))
+        final.append(float(errors[-1].max()) if np.all(np.isfinite(errors)) else float("inf"))
+    return {
+        "median_max_deg": float(np.median(worst)),
+        "max_deg": max(worst),
+        "final_deg": max(final),
+        "lost": sum(w > LOST_DEG for w in worst),
+        "runs": len(worst),
+    }
+
+
+def _deg(value: float) -> str:
+    return "lost" if not value < 1000.0 else f"{value:.2f}" if value < 100.0 else f"{value:.0f}"
+
+
+def _entry(cell: dict) -> str:
+    text = f"{_deg(cell['median_max_deg'])}; {_deg(cell['max_deg'])} / {_deg(cell['final_deg'])}"
+    return text + (f" (lost {cell['lost']})" if cell["lost"] else "")
+
+
+def markdown(cells: list[dict]) -> str:
+    """One row per arm, driver and effect; one column per variant."""
+    lines = [
+        "| arm | driver | effects | " + " | ".join(VARIANTS) + " |",
+        "|---|---|---|" + "---|" * len(VARIANTS),
+    ]
+    rows: dict[tuple, dict[str, dict]] = {}
+    for c in cells:
+        rows.setdefault((c["arm"], c["rate_hz"], c["effects"]), {})[c["variant"]] = c
+    for (arm, rate, effects), variants in rows.items():
+        entries = " | ".join(_entry(variants[v]) for v in VARIANTS)
+        lines.append(f"| {arm} | {rate} Hz | {effects} | {entries} |")
+    return "\n".join(lines) + "\n"
+
+
+def measure(arms: tuple[str, ...], rates: tuple[int, ...]) -> list[dict]:
+    cells = []
+    for arm in arms:
+        for rate in rates:
+            for name, effects in effects_of(arm).items():
+                for variant in VARIANTS:
+                    cell = {"arm": arm, "rate_hz": rate, "effects": name, "variant": variant}
+                    cell.update(one_cell(arm, rate, effects, variant))
+                    cells.append(cell)
+                    print(
+                        f"{arm:6s} {rate:4d} Hz {name:20s} {variant:11s} {_entry(cell)}",
+                        flush=True,
+                    )
+    return cells
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--rates", nargs="+", type=int, default=list(RATES_HZ))
+    parser.add_argument("--json", type=Path, help="write the cells here")
+    args = parser.parse_args()
+    cells = measure(tuple(args.arms), tuple(args.rates))
+    print()
+    print(markdown(cells), end="")
+    if args.json:
+        # A run that ended with the simulation blown up (not finite) is written as null.
+        finite = [
+            {k: (v if not isinstance(v, float) or np.isfinite(v) else None) for k, v in c.items()}
+            for c in cells
+        ]
+        doc = {"simulated_time": True, "law": "adaptive recommended, alone", "cells": finite}
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

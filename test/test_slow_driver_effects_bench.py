@@ -1,0 +1,85 @@
+"""``bench/slow_driver_effects.py``'s parts: which effects a cell has and what ``told`` tells.
+
+The bench's figures come from full runs (minutes); what is checked here, in milliseconds, is
+that its variants change what they say they change: the effects of each arm's preset one at a
+time, and the delay and velocity stencil a ``told`` law receives in place of robot mode's.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from apc_feedback.linearize import VelocityStencil
+from apc_lab.robot_compare import ARM_EFFECTS
+from apc_plant_sim.effects import ArmEffects
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+@pytest.fixture(scope="module")
+def sde():
+    sys.path.insert(0, str(BENCH))
+    try:
+        yield importlib.import_module("slow_driver_effects")
+    finally:
+        sys.path.remove(str(BENCH))
+
+
+class _Law:
+    """Records what robot mode would tell the adaptive law at a start."""
+
+    def __init__(self) -> None:
+        self.delay: tuple | None = None
+        self.stencil: object = "untold"
+
+    def expect_input_delay(self, seconds, candidates=()):
+        self.delay = (seconds, tuple(candidates))
+
+    def expect_velocity_stencil(self, stencil):
+        self.stencil = stencil
+
+
+def _told(sde, effects: ArmEffects, driver_period: float, stencil=None) -> _Law:
+    law = _Law()
+    sde.tell(effects, driver_period)(SimpleNamespace(law=law))
+    # What robot mode's start tells: one driver period, two as a candidate; its stencil.
+    law.expect_input_delay(driver_period, (2.0 * driver_period,))
+    law.expect_velocity_stencil(stencil)
+    return law
+
+
+def test_each_arm_has_none_its_presets_effects_alone_and_all(sde):
+    for arm in ("puma3", "panda"):
+        effects = sde.effects_of(arm)
+        assert list(effects)[:: len(effects) - 1] == ["none", "physical"]
+        assert effects["none"] == ArmEffects() and effects["physical"] == ARM_EFFECTS[arm]()
+        assert {"friction", "velocity_difference", "delay"} <= set(effects)
+    assert "armature" in sde.effects_of("puma3") and "armature" not in sde.effects_of("panda")
+
+
+def test_told_gives_the_drives_delay_and_differenced_velocity(sde):
+    period = 0.01
+    physical = _told(sde, ARM_EFFECTS["panda"](), period)
+    assert physical.delay == (pytest.approx(2 * period), ())
+    assert physical.stencil == VelocityStencil((0.0, period), (100.0, -100.0))
+    ideal = _told(sde, ArmEffects(), period)
+    assert ideal.delay == (pytest.approx(period), ()) and ideal.stencil is None
+    # robot mode's own estimate (a driver without velocity) is left as it is
+    own = VelocityStencil((0.0, 0.01, 0.02), (150.0, -200.0, 50.0))
+    assert _told(sde, ARM_EFFECTS["puma3"](), period, own).stencil == own
+
+
+def test_the_table_has_a_column_per_variant_and_says_lost(sde):
+    cell = {"arm": "puma3", "rate_hz": 100, "effects": "friction"}
+    cells = [
+        {**cell, "variant": v, "median_max_deg": m, "max_deg": m, "final_deg": 0.0, "lost": lost}
+        for v, m, lost in zip(sde.VARIANTS, (90.1, 1e6, 1.57, 1.57), (5, 5, 0, 0), strict=True)
+    ]
+    row = sde.markdown(cells).splitlines()[-1]
+    assert row.startswith("| puma3 | 100 Hz | friction | 90.10; 90.10 / 0.00 (lost 5) | lost;")
+    assert row.endswith("| 1.57; 1.57 / 0.00 |")
