@@ -32,15 +32,18 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from apc_feedback.presets import recommended_settings
+from apc_feedback.robot_loop import RobotLoop
 from apc_feedback.supervisor import SupervisorConfig
 from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.wall_clock import LOST_DEG
+from apc_plant_sim.effects import ArmEffects
 
 ARMS = ("puma3", "panda")
 EFFECTS = ("ideal", "physical")
@@ -64,10 +67,18 @@ def one_run(
     supervisor: SupervisorConfig | None,
     settings: dict | None = None,
     ideal_velocity: bool = False,
+    arm_effects: ArmEffects | None = None,
+    setup: Callable[[RobotLoop], object] | None = None,
 ) -> dict:
-    """Run ``index`` of a cell: max and final error per joint (deg), hand-overs."""
+    """Run ``index`` of a cell: max and final error per joint (deg), hand-overs.
+
+    ``arm_effects``: these effects instead of the ones ``effects`` names; ``setup``: as
+    :func:`run_robot_loop`'s (to tell or change the law before activation).
+    """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
+    if arm_effects is None and effects == "physical":
+        arm_effects = ARM_EFFECTS[arm]()
     run = run_robot_loop(
         2.5,
         goal_deg=scenario.q_goal_deg,
@@ -77,10 +88,11 @@ def one_run(
         payload_kg=scenario.payload_kg * PAYLOAD_FACTORS[index],
         latency=Latency(late_ms=driver_ms, probability=0.3, seed=index) if late else None,
         supervisor=supervisor,
-        effects=ARM_EFFECTS[arm]() if effects == "physical" else None,
+        effects=arm_effects,
         arm=scenario,
         settings=settings,
         velocity=True if ideal_velocity else None,
+        setup=setup,
     )
     errors = run.tracking_error_deg()
     return {
@@ -137,29 +149,44 @@ def _deg(value: float) -> str:
     return "lost" if value >= 1000.0 else f"{value:.2f}" if value < 100.0 else f"{value:.0f}"
 
 
-def _entry(cell: dict) -> str:
+def entry(cell: dict) -> str:
     """``median; worst max / final`` and what went wrong, e.g. ``1.01; 7.02 / 0.03 (1 h)``."""
     text = f"{_deg(cell['median_max_deg'])}; {_deg(cell['max_deg'])} / {_deg(cell['final_deg'])}"
     notes = []
     if cell["lost"]:
         notes.append(f"lost {cell['lost']}")
-    if cell["handover_runs"]:
+    if cell.get("handover_runs"):
         notes.append(f"{cell['handover_runs']} h")
     return text + (f" ({', '.join(notes)})" if notes else "")
 
 
-def markdown(cells: list[dict]) -> str:
-    """One row per arm, effects, rate and timing of the commands; one column per law."""
+#: Column headings of the cells' keys (a driver's rate is shown in Hz).
+HEADINGS = {"rate_hz": "driver"}
+
+
+def markdown(
+    cells: list[dict],
+    rows: tuple[str, ...] = ("arm", "effects", "rate_hz", "commands"),
+    column: str = "law",
+    columns: tuple[str, ...] = tuple(LAWS),
+) -> str:
+    """One row per value of the ``rows`` keys (default: arm, effects, rate and timing of the
+    commands); one column per value of ``column`` in ``columns`` (default: per law)."""
     lines = [
-        "| arm | effects | driver | commands | " + " | ".join(LAWS) + " |",
-        "|---|---|---|---|" + "---|" * len(LAWS),
-    ]
-    rows: dict[tuple, dict[str, dict]] = {}
+        "| " + " | ".join(HEADINGS.get(key, key) for key in rows) + " | " + " | ".join(columns)
+        + " |",
+        "|" + "---|" * (len(rows) + len(columns)),
+    ]  # fmt: skip
+    table: dict[tuple, dict[str, dict]] = {}
     for c in cells:
-        rows.setdefault((c["arm"], c["effects"], c["rate_hz"], c["commands"]), {})[c["law"]] = c
-    for (arm, effects, rate, commands), laws in rows.items():
-        entries = " | ".join(_entry(laws[law]) for law in LAWS)
-        lines.append(f"| {arm} | {effects} | {rate} Hz | {commands} | {entries} |")
+        table.setdefault(tuple(c[key] for key in rows), {})[c[column]] = c
+    for values, entries in table.items():
+        keyed = zip(rows, values, strict=True)
+        heads = [f"{v} Hz" if key == "rate_hz" else str(v) for key, v in keyed]
+        lines.append(
+            "| " + " | ".join(heads) + " | " + " | ".join(entry(entries[c]) for c in columns)
+            + " |"
+        )  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

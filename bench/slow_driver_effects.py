@@ -38,13 +38,13 @@ import json
 from pathlib import Path
 
 import numpy as np
-from robot_clock_offline import PAYLOAD_FACTORS
+from robot_clock_offline import PAYLOAD_FACTORS, entry, one_run
+from robot_clock_offline import markdown as table
 
 from apc_feedback.linearize import VelocityStencil
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop
-from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
-from apc_lab.robot_offline import run_robot_loop
+from apc_lab.robot_compare import ARM_EFFECTS
 from apc_lab.wall_clock import LOST_DEG
 from apc_plant_sim.effects import EFFECT_FIELDS, ArmEffects, single_effect
 
@@ -92,28 +92,17 @@ def tell(effects: ArmEffects, driver_period: float):
 
 
 def one_cell(arm: str, rate_hz: int, effects: ArmEffects, variant: str) -> dict:
-    scenario = arm_scenario(arm, "c")
-    driver_ms = 1000.0 / rate_hz
+    """The five runs of a cell: median and worst of the worst joint's max error, the worst
+    final error (deg; a run whose simulation blew up counts as infinite), runs lost."""
     settings = recommended_settings()
     if "held" in variant:
         settings["alpha_model"] = HELD_ALPHA_MODEL
+    setup = tell(effects, 1.0 / rate_hz) if "told" in variant else None
     worst, final = [], []
-    for factor in PAYLOAD_FACTORS:
-        run = run_robot_loop(
-            2.5,
-            goal_deg=scenario.q_goal_deg,
-            driver_ms=driver_ms,
-            phase_ms=0.37 * driver_ms,
-            transport_ms=0.3 * min(1.0, driver_ms),
-            payload_kg=scenario.payload_kg * factor,
-            effects=effects,
-            arm=scenario,
-            settings=settings,
-            setup=tell(effects, driver_ms * 1e-3) if "told" in variant else None,
-        )
-        errors = run.tracking_error_deg()
-        worst.append(float(errors.max()) if np.all(np.isfinite(errors)) else float("inf"))
-        final.append(float(errors[-1].max()) if np.all(np.isfinite(errors)) else float("inf"))
+    for i in range(len(PAYLOAD_FACTORS)):
+        run = one_run(arm, "", rate_hz, False, i, None, settings, arm_effects=effects, setup=setup)
+        worst.append(_finite(np.max(run["max_deg"])))
+        final.append(_finite(np.max(run["final_deg"])))
     return {
         "median_max_deg": float(np.median(worst)),
         "max_deg": max(worst),
@@ -123,28 +112,13 @@ def one_cell(arm: str, rate_hz: int, effects: ArmEffects, variant: str) -> dict:
     }
 
 
-def _deg(value: float) -> str:
-    return "lost" if not value < 1000.0 else f"{value:.2f}" if value < 100.0 else f"{value:.0f}"
-
-
-def _entry(cell: dict) -> str:
-    text = f"{_deg(cell['median_max_deg'])}; {_deg(cell['max_deg'])} / {_deg(cell['final_deg'])}"
-    return text + (f" (lost {cell['lost']})" if cell["lost"] else "")
+def _finite(value: float) -> float:
+    return float(value) if np.isfinite(value) else float("inf")
 
 
 def markdown(cells: list[dict]) -> str:
     """One row per arm, driver and effect; one column per variant."""
-    lines = [
-        "| arm | driver | effects | " + " | ".join(VARIANTS) + " |",
-        "|---|---|---|" + "---|" * len(VARIANTS),
-    ]
-    rows: dict[tuple, dict[str, dict]] = {}
-    for c in cells:
-        rows.setdefault((c["arm"], c["rate_hz"], c["effects"]), {})[c["variant"]] = c
-    for (arm, rate, effects), variants in rows.items():
-        entries = " | ".join(_entry(variants[v]) for v in VARIANTS)
-        lines.append(f"| {arm} | {rate} Hz | {effects} | {entries} |")
-    return "\n".join(lines) + "\n"
+    return table(cells, rows=("arm", "rate_hz", "effects"), column="variant", columns=VARIANTS)
 
 
 def measure(arms: tuple[str, ...], rates: tuple[int, ...]) -> list[dict]:
@@ -157,7 +131,7 @@ def measure(arms: tuple[str, ...], rates: tuple[int, ...]) -> list[dict]:
                     cell.update(one_cell(arm, rate, effects, variant))
                     cells.append(cell)
                     print(
-                        f"{arm:6s} {rate:4d} Hz {name:20s} {variant:11s} {_entry(cell)}",
+                        f"{arm:6s} {rate:4d} Hz {name:20s} {variant:11s} {entry(cell)}",
                         flush=True,
                     )
     return cells
