@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,7 @@ def effects_of(arm: str) -> dict[str, ArmEffects]:
     return out
 
 
-def tell(effects: ArmEffects, driver_period: float):
+def tell(effects: ArmEffects, driver_period: float) -> Callable[[RobotLoop], None]:
     """``setup`` for :func:`run_robot_loop`: the law told the driver's delay and velocity."""
     periods = 1 + effects.command_delay
     difference = effects.velocity == "difference"
@@ -75,7 +76,7 @@ def tell(effects: ArmEffects, driver_period: float):
         law = loop.law
         expect_delay, expect_stencil = law.expect_input_delay, law.expect_velocity_stencil
 
-        def expect_input_delay(seconds: float, candidates=()) -> None:
+        def expect_input_delay(seconds: float, candidates: tuple[float, ...] = ()) -> None:
             expect_delay(periods * driver_period, ())
 
         def expect_velocity_stencil(stencil: VelocityStencil | None) -> None:
