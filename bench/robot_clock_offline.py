@@ -60,25 +60,27 @@ LAWS: dict[str, SupervisorConfig | None] = {
 
 def one_run(
     arm: str,
-    effects: str,
+    effects: str | ArmEffects,
     rate_hz: float,
     late: bool,
     index: int,
     supervisor: SupervisorConfig | None,
     settings: dict | None = None,
     ideal_velocity: bool = False,
-    arm_effects: ArmEffects | None = None,
     setup: Callable[[RobotLoop], object] | None = None,
 ) -> dict:
     """Run ``index`` of a cell: max and final error per joint (deg), hand-overs.
 
-    ``arm_effects``: these effects instead of the ones ``effects`` names; ``setup``: as
-    :func:`run_robot_loop`'s (to tell or change the law before activation).
+    ``effects``: one of :data:`EFFECTS`, or the arm's effects themselves (in MuJoCo, as
+    ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before
+    activation).
     """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
-    if arm_effects is None and effects == "physical":
-        arm_effects = ARM_EFFECTS[arm]()
+    if isinstance(effects, ArmEffects):
+        arm_effects: ArmEffects | None = effects
+    else:
+        arm_effects = ARM_EFFECTS[arm]() if effects == "physical" else None
     run = run_robot_loop(
         2.5,
         goal_deg=scenario.q_goal_deg,
@@ -102,6 +104,26 @@ def one_run(
     }
 
 
+def summarise(runs: list[dict]) -> dict:
+    """A cell of :func:`one_run`'s runs: the worst and the median over the runs of the worst
+    joint's max error, the worst final error (deg), the runs lost (beyond ``LOST_DEG``), the
+    runs, the runs with a hand-over. A run whose simulation blew up (an error not finite)
+    counts as infinite, so as lost."""
+    worst = [_finite(np.max(r["max_deg"])) for r in runs]
+    return {
+        "max_deg": max(worst),
+        "median_max_deg": float(np.median(worst)),
+        "final_deg": max(_finite(np.max(r["final_deg"])) for r in runs),
+        "lost": sum(w > LOST_DEG for w in worst),
+        "runs": len(runs),
+        "handover_runs": sum(r["handovers"] > 0 for r in runs),
+    }
+
+
+def _finite(value: float) -> float:
+    return float(value) if np.isfinite(value) else float("inf")
+
+
 def measure(
     arms: tuple[str, ...] = ARMS, settings: dict | None = None, ideal_velocity: bool = False
 ) -> list[dict]:
@@ -119,19 +141,13 @@ def measure(
                             )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
-                        worst = [max(r["max_deg"]) for r in runs]
                         cell = {
                             "arm": arm,
                             "effects": effects,
                             "rate_hz": rate,
                             "commands": "30 % one cycle late" if late else "on time",
                             "law": law,
-                            "max_deg": max(worst),
-                            "median_max_deg": float(np.median(worst)),
-                            "final_deg": max(max(r["final_deg"]) for r in runs),
-                            "lost": sum(w > LOST_DEG for w in worst),
-                            "runs": len(runs),
-                            "handover_runs": sum(r["handovers"] > 0 for r in runs),
+                            **summarise(runs),
                         }
                         cells.append(cell)
                         print(
@@ -155,7 +171,7 @@ def entry(cell: dict) -> str:
     notes = []
     if cell["lost"]:
         notes.append(f"lost {cell['lost']}")
-    if cell.get("handover_runs"):
+    if cell["handover_runs"]:
         notes.append(f"{cell['handover_runs']} h")
     return text + (f" ({', '.join(notes)})" if notes else "")
 

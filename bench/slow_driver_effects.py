@@ -39,14 +39,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from robot_clock_offline import PAYLOAD_FACTORS, entry, one_run
+from robot_clock_offline import PAYLOAD_FACTORS, entry, one_run, summarise
 from robot_clock_offline import markdown as table
 
 from apc_feedback.linearize import VelocityStencil
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop
 from apc_lab.robot_compare import ARM_EFFECTS
-from apc_lab.wall_clock import LOST_DEG
 from apc_plant_sim.effects import EFFECT_FIELDS, ArmEffects, single_effect
 
 ARMS = ("puma3", "panda")
@@ -93,28 +92,16 @@ def tell(effects: ArmEffects, driver_period: float) -> Callable[[RobotLoop], Non
 
 
 def one_cell(arm: str, rate_hz: int, effects: ArmEffects, variant: str) -> dict:
-    """The five runs of a cell: median and worst of the worst joint's max error, the worst
-    final error (deg; a run whose simulation blew up counts as infinite), runs lost."""
+    """The five runs of a cell, summarised as the grid's (:func:`summarise`)."""
     settings = recommended_settings()
     if "held" in variant:
         settings["alpha_model"] = HELD_ALPHA_MODEL
     setup = tell(effects, 1.0 / rate_hz) if "told" in variant else None
-    worst, final = [], []
-    for i in range(len(PAYLOAD_FACTORS)):
-        run = one_run(arm, "", rate_hz, False, i, None, settings, arm_effects=effects, setup=setup)
-        worst.append(_finite(np.max(run["max_deg"])))
-        final.append(_finite(np.max(run["final_deg"])))
-    return {
-        "median_max_deg": float(np.median(worst)),
-        "max_deg": max(worst),
-        "final_deg": max(final),
-        "lost": sum(w > LOST_DEG for w in worst),
-        "runs": len(worst),
-    }
-
-
-def _finite(value: float) -> float:
-    return float(value) if np.isfinite(value) else float("inf")
+    runs = [
+        one_run(arm, effects, rate_hz, False, i, None, settings, setup=setup)
+        for i in range(len(PAYLOAD_FACTORS))
+    ]
+    return summarise(runs)
 
 
 def markdown(cells: list[dict]) -> str:

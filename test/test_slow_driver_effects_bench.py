@@ -75,7 +75,7 @@ def test_told_gives_the_drives_delay_and_differenced_velocity(sde):
 
 
 def test_the_table_has_a_column_per_variant_and_says_lost(sde):
-    cell = {"arm": "puma3", "rate_hz": 100, "effects": "friction"}
+    cell = {"arm": "puma3", "rate_hz": 100, "effects": "friction", "handover_runs": 0}
     cells = [
         {**cell, "variant": v, "median_max_deg": m, "max_deg": m, "final_deg": 0.0, "lost": lost}
         for v, m, lost in zip(sde.VARIANTS, (90.1, 1e6, 1.57, 1.57), (5, 5, 0, 0), strict=True)
@@ -83,3 +83,17 @@ def test_the_table_has_a_column_per_variant_and_says_lost(sde):
     row = sde.markdown(cells).splitlines()[-1]
     assert row.startswith("| puma3 | 100 Hz | friction | 90.10; 90.10 / 0.00 (lost 5) | lost;")
     assert row.endswith("| 1.57; 1.57 / 0.00 |")
+
+
+def test_a_cell_counts_a_run_that_blew_up_as_lost(sde):
+    """The grid's summary (shared by this bench): a run whose errors are not finite (the
+    simulation blew up) is the cell's worst and lost, whatever its place among the runs."""
+    from robot_clock_offline import summarise
+
+    fine = {"max_deg": [0.3, 0.2], "final_deg": [0.01, 0.02], "handovers": 0}
+    blown = {"max_deg": [float("nan"), 0.2], "final_deg": [float("nan"), 0.0], "handovers": 1}
+    for runs in ([fine, blown, fine], [blown, fine, fine]):
+        cell = summarise(runs)
+        assert cell["max_deg"] == float("inf") and cell["final_deg"] == float("inf")
+        assert cell["lost"] == 1 and cell["runs"] == 3 and cell["handover_runs"] == 1
+        assert cell["median_max_deg"] == 0.3
