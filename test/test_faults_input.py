@@ -517,6 +517,14 @@ BAD_CONFIGS = [
     ("forgetting", FB, ["-p", "adaptive.forgetting:=bogus"], "adaptive.forgetting", "bogus"),
     ("mode", PLANT, ["-p", "mode:=fast"], "mode", "must be one of"),
     (
+        "sim_time_lockstep",
+        PLANT,
+        ["-p", "mode:=lockstep", "-p", "use_sim_time:=true"],
+        "use_sim_time",
+        "lockstep owns time",
+    ),
+    ("sim_time_own_clock", PLANT, ["-p", "use_sim_time:=true"], "publish_clock", "must be false"),
+    (
         "urdf_missing",
         FB,
         ["-p", "robot_description_path:=/nonexistent/arm.urdf"],

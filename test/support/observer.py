@@ -27,7 +27,8 @@ class Observer:
     """An rclpy node in the test process that records what the nodes publish.
 
     ``states``: ``(wall, stamp_ns, q, qd, effort)`` per ``joint_states``; ``ff``: ``{stamp:
-    u_n}``; ``diag``: ``(wall, level, message, values)`` of the plant's ``/diagnostics``;
+    u_n}``; ``fb``: ``{stamp: du}``; ``diag``: ``(wall, level, message, values)`` of the
+    plant's ``/diagnostics``;
     ``raw``: ``{(topic, key): [bytes, ...]}`` of every message when ``raw=True``.
     """
 
@@ -38,6 +39,7 @@ class Observer:
         self.node = self.graph.add(rclpy.create_node("fault_observer", context=self.context))
         self.states: list[tuple[float, int, np.ndarray, np.ndarray, np.ndarray | None]] = []
         self.ff: dict[int, np.ndarray] = {}
+        self.fb: dict[int, np.ndarray] = {}
         self.diag: list[tuple[float, int, str, dict[str, str]]] = []
         self.feedback_diag: dict[str, str] = {}  # the feedback node's latest values
         self.raw: dict[tuple[str, str], list[tuple[float, bytes]]] = {}
@@ -58,6 +60,7 @@ class Observer:
             if states:  # (an extra joint_states subscriber counts for wait_for_subscribers)
                 self.node.create_subscription(JointState, wire.JOINT_STATES, self._on_state, qos)
             self.node.create_subscription(JointState, wire.FEEDFORWARD_TORQUE, self._on_ff, qos)
+            self.node.create_subscription(JointState, wire.FEEDBACK_TORQUE, self._on_fb, qos)
             self.node.create_subscription(
                 DiagnosticArray, wire.DIAGNOSTICS, self._on_diag, deep(wire.DIAGNOSTICS_QOS)
             )
@@ -76,6 +79,9 @@ class Observer:
 
     def _on_ff(self, msg: JointState) -> None:
         self.ff[wire.stamp_to_ns(msg.header.stamp)] = np.array(msg.effort)
+
+    def _on_fb(self, msg: JointState) -> None:
+        self.fb[wire.stamp_to_ns(msg.header.stamp)] = np.array(msg.effort)
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for status in msg.status:

@@ -14,8 +14,12 @@ Modes
 ``realtime`` (a robot's reality; the default for ``ros2 run``)
     A wall timer of period T steps the arm with the newest torques it holds. Torques stamped
     earlier than the sample are *late*, none at all *missing*; both are counted, never waited
-    for. Safe policy: with no fresh feedback torque for ``watchdog_s`` the nominal torque alone
-    is applied (reported as a warning); with no fresh nominal torque for ``watchdog_s`` the
+    for. With ``use_sim_time`` the timer (and every time the node measures) runs on ``/clock``
+    from elsewhere instead, and ``publish_clock`` must be false: whoever publishes ``/clock``
+    decides when each period ends, so a test reproduces a real-time run, its late torques,
+    watchdog and brake, sample by sample whatever the machine's load.
+    Safe policy: with no fresh feedback torque for ``watchdog_s`` the nominal torque alone is
+    applied (reported as a warning); with no fresh nominal torque for ``watchdog_s`` the
     arm *brakes* -- integration stops with zero velocity, as a PUMA's brakes would hold it --
     and a fault is reported until fresh torques return.
 
@@ -30,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import sys
-import time
 from typing import Any
 
 import numpy as np
@@ -69,7 +72,12 @@ DERIVED = {"q_initial_deg": "q_start_deg", "payload.frame": "payload_frame"}
 PARAMS: tuple[Param, ...] = (
     *ROBOT_PARAMS,
     *TRUE_ARM_PARAMS,
-    Param("mode", "realtime", "'realtime' (wall timer, newest torques) or 'lockstep'"),
+    Param(
+        "mode",
+        "realtime",
+        "'realtime' (a timer of period T, on /clock with use_sim_time; newest torques) or "
+        "'lockstep'",
+    ),
     Param("n_samples", 0, "stop after this many periods; 0 = run until stopped", 0, 10**9),
     Param(
         "wait_for_subscribers",
@@ -80,7 +88,11 @@ PARAMS: tuple[Param, ...] = (
     ),
     *PACING_PARAMS,
     *WATCHDOG_PARAMS,
-    Param("publish_clock", True, "publish /clock = kT (sim time for use_sim_time nodes)"),
+    Param(
+        "publish_clock",
+        True,
+        "publish /clock = kT (sim time for use_sim_time nodes); false with use_sim_time",
+    ),
 )
 
 
@@ -108,6 +120,22 @@ class PlantNode(Node):
             raise ConfigError(
                 f"parameter 'mode': must be one of {', '.join(MODES)}, got {self.mode!r}"
             )
+        # The clock of the real-time timer and of every time measured here: steady wall time,
+        # or /clock from elsewhere with use_sim_time (the plant then never publishes /clock: it
+        # would step on its own time). Lockstep owns time.
+        sim_time = bool(self.get_parameter("use_sim_time").value)
+        if sim_time and self.mode == "lockstep":
+            raise ConfigError(
+                "parameter 'use_sim_time': lockstep owns time (it publishes /clock); "
+                "use mode 'realtime' to step on /clock from elsewhere"
+            )
+        if sim_time and values["publish_clock"]:
+            raise ConfigError(
+                "parameter 'publish_clock': must be false with use_sim_time (the plant would "
+                "step on its own /clock)"
+            )
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self._clock = self.get_clock() if sim_time else self._wall
         chosen = fill_derived(values, robot, DERIVED)
         self.arm = TrueArm.from_params(robot, values)
         for line in chosen:
@@ -122,10 +150,9 @@ class PlantNode(Node):
         self.exit_code = 0
         self.intake = TorqueIntake.from_params(self.period_ns, self.mode == "lockstep", values)
         self._applied: np.ndarray | None = None
-        self.pacer = StatePacer.from_params(values, now=time.monotonic())
+        self.pacer = StatePacer.from_params(values, now=self._now())
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
-        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
 
         self.js_pub = self.create_publisher(JointState, wire.JOINT_STATES, qos)
         self.description_pub = publish_robot_description(self, urdf_xml(values))
@@ -159,12 +186,16 @@ class PlantNode(Node):
             self._timer = self.create_timer(0.01, tick, clock=self._wall)
         else:
             tick = guarded(self, diag, "realtime_tick", self._realtime_tick)
-            self._timer = self.create_timer(self.plant.config.period, tick, clock=self._wall)
+            self._timer = self.create_timer(self.plant.config.period, tick, clock=self._clock)
 
     # -- wire -----------------------------------------------------------------------------------
     @property
     def k(self) -> int:
         return self.plant.k
+
+    def _now(self) -> float:
+        """The time of the node's timer (s): steady wall time, or /clock with use_sim_time."""
+        return self._clock.now().nanoseconds / wire.NS_PER_S
 
     def _publish_state(self, resend: bool = False) -> None:
         stamp = self.k * self.period_ns
@@ -185,7 +216,7 @@ class PlantNode(Node):
             self._fail(f"sample {self.k}: the arm's state cannot be published ({exc})")
             return
         self.js_pub.publish(msg)
-        self.pacer.sent(time.monotonic(), resend)
+        self.pacer.sent(self._now(), resend)
 
     @property
     def started(self) -> bool:
@@ -204,7 +235,7 @@ class PlantNode(Node):
             self.diagnostics.count(f"{filed.value}.{topic}")
             return
         if filed is Filed.TAKEN and torque.stamp_ns == self.k * self.period_ns:
-            self.diagnostics.time(f"latency.{topic}", self.pacer.waited(time.monotonic()))
+            self.diagnostics.time(f"latency.{topic}", self.pacer.waited(self._now()))
         if self.intake.lockstep:
             self._lockstep_try()
 
@@ -223,13 +254,13 @@ class PlantNode(Node):
             return
         if not self.started:
             self._start_when_ready("lockstep")
-            if not self.started and self.pacer.start_timed_out(time.monotonic()):
+            if not self.started and self.pacer.start_timed_out(self._now()):
                 self._fail(
                     f"lockstep: peers missing after {self._values['lockstep_timeout_s']} s: "
                     f"{self._missing_peers()}"
                 )
             return
-        now = time.monotonic()
+        now = self._now()
         if self.pacer.sample_timed_out(now):
             missing = [source.value for source in self.intake.missing(self.k)]
             self._fail(
@@ -295,7 +326,7 @@ class PlantNode(Node):
     def _realtime_tick(self) -> None:
         if self.done:
             return
-        now = time.monotonic()
+        now = self._now()
         if not self.started:
             self._start_when_ready("real time")
             return
