@@ -14,6 +14,7 @@ them derived from its URDF, printed), the recommended adaptive preset, lockstep 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import signal
 import subprocess
@@ -79,6 +80,20 @@ class RunSpec:
     settings: Mapping[str, Any] | None = None
     mode: str = "lockstep"
     name: str = "run"
+
+    def description(self) -> dict[str, Any]:
+        """The run as a recording describes it (``custom_data['apc.run']``, what
+        :func:`apc_recording.runs.load_run` reads back)."""
+        return {
+            "name": self.name,
+            "controller": self.controller,
+            "mode": self.mode,
+            "settings": dict(self.settings or {}),
+            "scenario": {
+                k: list(v) if isinstance(v, tuple) else v
+                for k, v in dataclasses.asdict(self.scenario).items()
+            },
+        }
 
     def node_parameters(self) -> dict[str, dict[str, Any]]:
         """ROS parameters of each node, keyed by node name (a ROS parameter-file layout)."""
@@ -256,7 +271,7 @@ def run_in_process(
         executor = None
         t0 = time.monotonic()
         try:
-            recorder = recorder_node(path, context, _describe(spec))
+            recorder = recorder_node(path, context, spec.description())
             nodes.append(recorder)
             nodes.append(
                 FeedforwardNode(
@@ -340,7 +355,7 @@ def run_in_processes(
             return max(recorder.counts.get("/joint_states", 0) - 1, 0) if recorder else 0
 
         try:
-            recorder = recorder_node(path, context, _describe(spec))
+            recorder = recorder_node(path, context, spec.description())
             executor = make_executor("events", context)
             executor.add_node(recorder)
 
@@ -431,20 +446,6 @@ def stop_processes(procs: Iterable[subprocess.Popen], timeout_s: float = 3.0) ->
 
 def _since(t0: float) -> float:
     return time.monotonic() - t0
-
-
-def _describe(spec: RunSpec) -> dict[str, Any]:
-    from dataclasses import asdict
-
-    return {
-        "name": spec.name,
-        "controller": spec.controller,
-        "mode": spec.mode,
-        "settings": dict(spec.settings or {}),
-        "scenario": {
-            k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec.scenario).items()
-        },
-    }
 
 
 def summarize(path: Path) -> str:
