@@ -343,6 +343,18 @@ def test_every_node_stops_on_signal_within_2s(tmp_path, observer, sig):
         kids.close()
 
 
+#: ``python`` as a terminal starts a foreground job: SIGINT at its default disposition. A test
+#: run in the background of a non-interactive shell (``make test &``) has SIGINT ignored, its
+#: children inherit that, and the runner, as a program should, leaves an ignored SIGINT
+#: ignored (:class:`apc_core.nodeutil.StopSignals`): SIGINT would then not stop it at all.
+FOREGROUND = [
+    sys.executable,
+    "-c",
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])",
+]
+
+
 def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[str, int]:
     """Start the runner, signal it once 40 set points are out; check that it ends within 2 s,
     leaves no process of its group and finishes a complete recording; the recording's counts.
@@ -354,7 +366,7 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
     tmp_path.mkdir(parents=True, exist_ok=True)
     obs = Observer(states=False)
     out = tmp_path / "runs"
-    cmd = [sys.executable, "-m", "apc_lab.experiment", "--case", "c", "--hold", "60"]
+    cmd = [*FOREGROUND, "-m", "apc_lab.experiment", "--case", "c", "--hold", "60"]
     cmd += ["--quiet", "--out", str(out), "--name", "sig", "--timeout", "120"]
     cmd += ["--processes"] if processes else []
     with open(tmp_path / "runner.err", "wb") as err:
