@@ -91,6 +91,23 @@ def _run_across_link(link: Link, tmp_path: Path, name: str, mode: str) -> tuple[
                 kids.stderr("recorder")[-2000:],
             )
             time.sleep(0.05)
+        # ... and each controller's writer says when it has matched the recorder (and the
+        # set point, the feedback too): the two sides of a match across the link come at
+        # different times, and a torque published before its writer matched the recorder never
+        # reaches the recording (VOLATILE).
+        matched = {
+            "feedforward_node": (
+                f"/{wire.SETPOINT}: 2 subscriber",
+                f"/{wire.FEEDFORWARD_TORQUE}: 1 subscriber",
+            ),
+            "feedback_node": (f"/{wire.FEEDBACK_TORQUE}: 1 subscriber",),
+        }
+        while not all(line in kids.stderr(k) for k, lines in matched.items() for line in lines):
+            assert time.monotonic() < deadline + 60, (
+                "the controllers' writers did not match the recorder",
+                {k: kids.stderr(k)[-1500:] for k in matched},
+            )
+            time.sleep(0.05)
         plant = kids.start("plant_node", **a)
         try:
             plant.wait(60)

@@ -29,9 +29,11 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile
 from std_msgs.msg import String
 
 import apc_msgs_py as wire
@@ -123,6 +125,23 @@ def publish_robot_description(node: Node, xml: str) -> Publisher:
     publisher = node.create_publisher(String, wire.ROBOT_DESCRIPTION, wire.ROBOT_DESCRIPTION_QOS)
     publisher.publish(String(data=xml))
     return publisher
+
+
+def matched_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile) -> Publisher:
+    """``node.create_publisher`` that logs how many subscriptions it is matched with, each time
+    that changes (``<topic>: N subscriber(s)``): the writer's side of the match the recorder
+    logs from the reader's. The two sides match at different times (across a lossy network
+    seconds apart: a lost discovery message waits for its repair), and a message published
+    before a reader is matched never reaches it (VOLATILE): what a run that must be recorded
+    whole waits for."""
+    resolved = node.resolve_topic_name(topic)
+
+    def matched(info: Any) -> None:
+        node.get_logger().info(f"{resolved}: {info.current_count} subscriber(s)")
+
+    return node.create_publisher(
+        msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(matched=matched)
+    )
 
 
 def controller_robot_from_params(values: dict[str, Any]) -> Robot:

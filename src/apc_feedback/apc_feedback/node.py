@@ -37,6 +37,7 @@ from apc_core.nodeutil import (
     Stopwatch,
     controller_robot_from_params,
     guarded,
+    matched_publisher,
     reject,
     run_node,
 )
@@ -82,7 +83,7 @@ class FeedbackNode(Node):
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
 
-        self.torque_pub = self.create_publisher(JointState, wire.FEEDBACK_TORQUE, qos)
+        self.torque_pub = matched_publisher(self, JointState, wire.FEEDBACK_TORQUE, qos)
         self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, qos)
         diag = self.diagnostics
         for msg_type, topic, callback in (

@@ -42,6 +42,7 @@ from apc_core.nodeutil import (
     Stopwatch,
     controller_robot_from_params,
     guarded,
+    matched_publisher,
     reject,
     run_node,
 )
@@ -98,8 +99,8 @@ class FeedforwardNode(Node):
         self._setpoint_msg = JointTrajectory()
         self._torque_msg = JointState()
 
-        self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
-        self.torque_pub = self.create_publisher(JointState, wire.FEEDFORWARD_TORQUE, qos)
+        self.setpoint_pub = matched_publisher(self, JointTrajectory, wire.SETPOINT, qos)
+        self.torque_pub = matched_publisher(self, JointState, wire.FEEDFORWARD_TORQUE, qos)
         diag = self.diagnostics
         self.create_subscription(
             JointState,
