@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
-from support.arm import ROBOT
+from support.arm import ROBOT, T_NS
 from support.observer import Observer
 from support.processes import Children, process_group, wait_all, write_params
 from support.report import report
@@ -50,12 +50,9 @@ from apc_recording.bag import BagTruncatedWarning, bag_info, read_messages
 from apc_recording.bag.recovery import main as bag_recover
 
 T = 0.010
-PERIOD_NS = 10_000_000
 WATCHDOG_S = 0.05
 #: The feedforward node's lookahead (its default): how many samples ahead its torques are.
 LOOKAHEAD = 1
-#: Allowance for a loaded 2-core machine (scheduling of four Python processes, DDS latency).
-SCHEDULING_MARGIN_S = 0.15
 
 
 # ----------------------------------------------------------------------------------------------
@@ -113,7 +110,7 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         kids.start_controllers()
         obs.spin_until(obs.controllers_up, 30, "controllers' publishers")
         kids.start("plant_node")
-        clock = ClockStepper(obs, PERIOD_NS, LOOKAHEAD, list(kids.procs.values()))
+        clock = ClockStepper(obs, T_NS, LOOKAHEAD, list(kids.procs.values()))
         k = clock.start()
         while k < 100:
             k = clock.step()
@@ -125,17 +122,17 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         clock.procs = [kids.procs["plant_node"], kids.procs["feedforward_node"]]
         for _ in range(stale + 20):
             k = clock.step((FF,))
-        used = [_sources(obs, j) for j in range(killed + 1, k + 1)]
+        states = _by_sample(obs)
+        used = [_sources(obs, states[j]) for j in range(killed + 1, k + 1)]
         last_fb = max(m_fb for _, m_fb in used if m_fb is not None)
         assert killed - stale < last_fb <= killed, used
         # The tick of sample j applies its torques over [j, j+1): joint state j + 1 reports it.
         first_nominal = last_fb + stale + 1
         for j in range(killed + 1, k + 1):
-            m_ff, m_fb = _sources(obs, j)
+            m_ff, m_fb = _sources(obs, states[j])
             assert m_ff is not None and j - 1 - m_ff < stale, (j, m_ff)
             # (a torque late at the plant may still come after an older one was applied)
             assert (m_fb is not None) == (j < first_nominal), (j, m_fb, first_nominal)
-        states = _by_sample(obs)
         assert np.ptp([states[j][2] for j in range(first_nominal, k + 1)], axis=0).max() > 0.0
         level, message, values = _plant_diagnostics(obs)  # the plant does not tick meanwhile
         assert level == DiagnosticStatus.WARN and "feedback" in message, message
@@ -146,7 +143,7 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         kids.start("feedback_node")
         clock.procs = list(kids.procs.values())
         clock.step_until_answered(FB, (FF,), max_samples=300)
-        back = _step_until(clock, lambda j: _sources(obs, j)[1] is not None)
+        back = _step_until(clock, lambda j: _sources(obs, _by_sample(obs)[j])[1] is not None)
         for _ in range(20):
             k = clock.step()
         late += _assert_both_fresh(obs, back, k, stale)
@@ -160,7 +157,7 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         for _ in range(LOOKAHEAD + stale + 30):
             k = clock.step(())
         states = _by_sample(obs)
-        used = [_sources(obs, j)[0] for j in range(killed + 1, k + 1)]
+        used = [_sources(obs, states[j])[0] for j in range(killed + 1, k + 1)]
         last_ff = max(m for m in used if m is not None)
         # The last nominal torque was sent ahead, with the joint state before the kill.
         assert killed - stale < last_ff <= killed + LOOKAHEAD, used
@@ -182,7 +179,7 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         clock.step_until_answered(FF, (), max_samples=300)
         # The feedback answers once it has discovered the new node's set points.
         clock.step_until_answered(FB, (FF,), max_samples=300)
-        back = _step_until(clock, lambda j: _sources(obs, j) != (None, None))
+        back = _step_until(clock, lambda j: _sources(obs, _by_sample(obs)[j]) != (None, None))
         for _ in range(40):
             k = clock.step()
         states = _by_sample(obs)
@@ -206,18 +203,18 @@ def test_controller_death_watchdog_and_restart_in_simulated_time(tmp_path, obser
         kids.close()
 
 
-def _sources(obs: Observer, j: int, depth: int = 10) -> tuple[int | None, int | None]:
-    """Whose torques joint state ``j`` reports applied: ``(m_ff, m_fb)``, the samples whose
-    ``u_n`` and ``du`` sum (within the effort limits) to its effort, the newest that fit; ``m_fb``
-    None for the nominal torque alone; ``(None, None)`` for neither (braked)."""
-    effort = _by_sample(obs)[j][4]
+def _sources(obs: Observer, state, depth: int = 10) -> tuple[int | None, int | None]:
+    """Whose torques a joint state reports applied: ``(m_ff, m_fb)``, the samples whose ``u_n``
+    and ``du`` sum (within the effort limits) to its effort, the newest that fit; ``m_fb`` None
+    for the nominal torque alone; ``(None, None)`` for neither (braked)."""
+    j, effort = state[1] // T_NS, state[4]
     limit = ROBOT.effort_limit
     for m_ff in range(j - 1, j - 2 - depth, -1):
-        ff = obs.ff.get(m_ff * PERIOD_NS)
+        ff = obs.ff.get(m_ff * T_NS)
         if ff is None:
             continue
         for m_fb in range(j - 1, j - 2 - depth, -1):
-            fb = obs.fb.get(m_fb * PERIOD_NS)
+            fb = obs.fb.get(m_fb * T_NS)
             if fb is not None and np.array_equal(effort, np.clip(ff + fb, -limit, limit)):
                 return m_ff, m_fb
         if np.array_equal(effort, np.clip(ff, -limit, limit)):
@@ -228,9 +225,9 @@ def _sources(obs: Observer, j: int, depth: int = 10) -> tuple[int | None, int | 
 def _assert_both_fresh(obs: Observer, first: int, last: int, stale: int) -> int:
     """Joint states ``first..last`` report both torques applied, each of them fresh (answering
     a sample less than ``stale`` before); how many of them were late (older than the sample)."""
-    late = 0
+    states, late = _by_sample(obs), 0
     for j in range(first, last + 1):
-        m_ff, m_fb = _sources(obs, j)
+        m_ff, m_fb = _sources(obs, states[j])
         assert m_ff is not None and m_fb is not None, (j, m_ff, m_fb)
         assert j - 1 - min(m_ff, m_fb) < stale, (j, m_ff, m_fb)
         late += min(m_ff, m_fb) < j - 1
@@ -250,7 +247,7 @@ def _step_until(clock: ClockStepper, taken, max_samples: int = 300) -> int:
 
 def _by_sample(obs: Observer) -> dict:
     """The joint states seen, by sample index (a resent state 0 counts once)."""
-    return {s[1] // PERIOD_NS: s for s in obs.states}
+    return {s[1] // T_NS: s for s in obs.states}
 
 
 def _kill(kids: Children, key: str) -> None:

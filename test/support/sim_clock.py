@@ -110,9 +110,7 @@ class ClockStepper:
         first states sent while it is being discovered: the samples meanwhile run without it."""
         for _ in range(max_samples):
             k = self.step(alive)
-            deadline = time.monotonic() + look_s
-            while not self.answered(k, who) and time.monotonic() < deadline:
-                self.obs.executor.spin_once(timeout_sec=0.005)
+            self._spin_until(lambda k=k: self.answered(k, who), look_s)
             if self.answered(k, who):
                 return k
         raise AssertionError(f"{who} did not answer within {max_samples} samples")
