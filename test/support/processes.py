@@ -75,20 +75,31 @@ class Children:
         env: dict | None = None,
         key: str | None = None,
     ) -> subprocess.Popen:
-        key = key or name
-        self._n += 1
         ros_args = ["--ros-args"]
         if self.params_file is not None and name != "recorder":
             ros_args += ["--params-file", str(self.params_file)]
+        return self.start_module(
+            key or name, NODE_MODULES[name], *ros_args, *args, prefix=prefix, env=env
+        )
+
+    def start_module(
+        self,
+        key: str,
+        module: str,
+        *args: str,
+        prefix: tuple[str, ...] = (),
+        env: dict | None = None,
+    ) -> subprocess.Popen:
+        """``python -m module args`` under ``key`` (a node, or a helper such as the clock
+        stepper of :mod:`support.sim_clock`)."""
+        self._n += 1
         stem = self.dir / f"{key}.{self._n}"
         with open(f"{stem}.out", "wb") as out, open(f"{stem}.err", "wb") as err:
             proc = subprocess.Popen(
-                [*prefix, sys.executable, "-m", NODE_MODULES[name], *ros_args, *args],
-                stdout=out,
-                stderr=err,
-                env=env,
+                [*prefix, sys.executable, "-m", module, *args], stdout=out, stderr=err, env=env
             )
         proc.stderr_path = Path(f"{stem}.err")  # type: ignore[attr-defined]
+        proc.stdout_path = Path(f"{stem}.out")  # type: ignore[attr-defined]
         if key in self.procs:
             self.dead.append(self.procs[key])
         self.procs[key] = proc

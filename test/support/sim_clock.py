@@ -119,3 +119,45 @@ class ClockStepper:
         deadline = time.monotonic() + seconds
         while not condition() and time.monotonic() < deadline:
             self.obs.executor.spin_once(timeout_sec=0.005)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m support.sim_clock PERIOD_NS LOOKAHEAD N_SAMPLES``: step ``/clock`` for a
+    plant in other processes until its last sample, then keep saying the last time until
+    stopped (SIGINT/SIGTERM). For nodes the test's own observer cannot reach, e.g. in a network
+    namespace: the stepper runs beside the plant. Prints ``stepped K`` when the last sample is
+    reached (``listening`` once its readers exist); exits 1 if a step waits longer than its
+    bound."""
+    import argparse
+    import signal
+
+    parser = argparse.ArgumentParser(prog="python -m support.sim_clock")
+    parser.add_argument("period_ns", type=int)
+    parser.add_argument("lookahead", type=int)
+    parser.add_argument("n_samples", type=int)
+    args = parser.parse_args(argv)
+    stop: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: stop.append(signum))
+    obs = Observer()
+    try:
+        clock = ClockStepper(obs, args.period_ns, args.lookahead)
+        print("listening", flush=True)
+        k = clock.start(timeout_s=120.0)
+        while k < args.n_samples - 1 and not stop:
+            k = clock.step()
+        clock.tick()  # the last sample: the plant applies its torques and ends
+        print(f"stepped {k + 1}", flush=True)
+        while not stop:  # /clock is best effort: the plant may not have heard the last tick
+            clock._spin_until(lambda: bool(stop), 0.5)
+            clock._publish()
+    except AssertionError as exc:
+        print(f"sim_clock: {exc}", flush=True)
+        return 1
+    finally:
+        obs.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
