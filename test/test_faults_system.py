@@ -268,7 +268,8 @@ def _plant_diagnostics(obs: Observer) -> tuple[int, str, dict[str, str]]:
 @pytest.mark.ros
 @pytest.mark.slow
 def test_lockstep_three_processes_peer_killed_ends_with_error(tmp_path, observer):
-    """Lockstep, three processes: SIGKILL the feedback mid-run; the plant exits 1 in time.
+    """Lockstep, three processes: SIGKILL the feedback mid-run; the plant exits 1 after its
+    ``lockstep_timeout_s`` (the spin's bound, timeout + 5 s, is the liveness limit).
 
     (``lockstep_timeout_s`` also bounds the wait for the peers at start, and discovering a new
     process took up to ~3 s here: FastDDS re-announces a participant every few seconds when its
@@ -289,7 +290,9 @@ def test_lockstep_three_processes_peer_killed_ends_with_error(tmp_path, observer
         took = time.monotonic() - t_kill
         report("lockstep peer killed -> plant exit", took_s=took, timeout_s=timeout_s)
         assert plant.returncode == 1
-        assert took <= timeout_s + 1.5
+        # Not before the timeout (less the part of a sample already waited when the feedback
+        # died); how soon after it a loaded machine exits is reported, not asserted.
+        assert took >= timeout_s - 0.5
         stderr = kids.stderr("plant_node")
         assert "no feedback/torque for sample" in stderr, stderr[-2000:]
         assert obs.k() < params["plant_node"]["n_samples"]

@@ -124,10 +124,12 @@ def test_lockstep_missing_peer_ends_with_a_clear_error(graph):
         )
     )
     plant_params = dict(params["plant_node"], wait_for_subscribers=1, lockstep_timeout_s=1.0)
-    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(plant_params)))
     t0 = time.monotonic()
+    plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(plant_params)))
     graph.spin_until(lambda: plant.done, timeout_s=10)
-    assert time.monotonic() - t0 < 3.0
+    # Not before its timeout (a steady-clock feature: how long after it a loaded machine
+    # gets there is not asserted; the rule itself: test_pacing.py in synthetic time).
+    assert time.monotonic() - t0 >= 1.0
     assert plant.exit_code == 1
     assert "no publisher on feedback/torque" in plant.diagnostics.message
 

@@ -36,6 +36,8 @@ def test_one_second_run_of_both_layouts_gives_the_figures():
             "sample_to_arrival_us",
         ):
             assert r[key] is not None, (layout, key)
-        assert r["cycles"] > 500 and r["commands_matched"] > 0, r
+        # How many of the 1000 cycles a loaded machine keeps is the benchmark's figure, not a
+        # pass mark: here the run only has to produce its figures.
+        assert r["cycles"] > 0 and r["commands_matched"] > 0, r
         assert r["latency_us"]["n"] == r["commands_matched"]
     assert "settings" in out

@@ -305,8 +305,21 @@ def _spin_sim(graph, driver: Driver, seconds: float) -> None:
     graph.spin_until(lambda: driver.sim_ns >= end, 30 + 10 * seconds, "simulated time")
 
 
+def _spin_until_quiet(graph, driver: Driver, quiet_s: float, timeout_s: float = 10.0) -> None:
+    """Spin until no command has come for ``quiet_s``; fails after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        n = len(driver.commands)
+        graph.spin_for(quiet_s)
+        if len(driver.commands) == n:
+            return
+        assert time.monotonic() < deadline, f"commands still coming {timeout_s} s on"
+
+
 def test_lifecycle_transitions_with_a_wall_clock_driver(graph, tmp_path):
-    """Nothing before activate, ~100 commands/s while active, none after deactivate."""
+    """Nothing before activate, commands while active, none after deactivate (once those
+    already on their way have arrived); on wall time, so nothing asserted depends on how
+    punctually the machine runs."""
     driver = graph.add(Driver(graph.context))
     observer = graph.add(rclpy.create_node("observer", context=graph.context))
     with _controllers(tmp_path, autostart=False):
@@ -319,13 +332,13 @@ def test_lifecycle_transitions_with_a_wall_clock_driver(graph, tmp_path):
             assert _change(graph, observer, Transition.TRANSITION_ACTIVATE)
             assert _state(graph, observer) == State.PRIMARY_STATE_ACTIVE
             n = len(driver.commands)
-            graph.spin_for(1.0)
-            assert len(driver.commands) - n > 50
+            graph.spin_until(lambda n=n: len(driver.commands) - n > 50, 30, "commands")
             assert all(c.shape == (3,) for _, c in driver.commands)
             assert _change(graph, observer, Transition.TRANSITION_DEACTIVATE)
-            graph.spin_for(0.1)
+            # Commands already on their way may still arrive; then none.
+            _spin_until_quiet(graph, driver, 0.5)
             n = len(driver.commands)
-            graph.spin_for(0.4)
+            graph.spin_for(1.0)
             assert len(driver.commands) == n
         assert _change(graph, observer, Transition.TRANSITION_CLEANUP)
         assert _state(graph, observer) == State.PRIMARY_STATE_UNCONFIGURED

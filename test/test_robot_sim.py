@@ -80,7 +80,11 @@ def robot_sim(tmp_path: Path, *params: str):
 
 
 def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
+    """On wall time: names, brakes, stamps on the driver's cycle grid, a command applied, the
+    command timeout, bad commands rejected. Nothing here depends on how punctually the machine
+    runs (the rate a loaded machine keeps is measured in ``bench/robot_loop.py``)."""
     peer = Peer(graph)
+    started_ns = time.time_ns()
     with robot_sim(
         tmp_path,
         "state_rate:=50.0",
@@ -98,10 +102,12 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
         # Brakes on until the first command: the arm stands at q_initial_deg.
         assert np.rad2deg(position["joint_2"]) == pytest.approx(-30.0)
         assert position["finger_joint"] == 0.0
-        # Stamps: the node's clock (system time), spaced 1/state_rate.
+        # Stamps: the node's clock (system time), on the cycle grid of 1/state_rate (a late
+        # callback publishes its newest cycle's state: a gap is whole periods).
         stamps = np.array([wire.stamp_to_ns(m.header.stamp) for _, m in peer.states[-15:]])
-        assert abs(stamps[-1] / 1e9 - time.time()) < 2.0
-        assert np.median(np.diff(stamps)) == pytest.approx(20e6, rel=0.2)
+        assert started_ns <= stamps[0] and stamps[-1] <= time.time_ns()
+        gaps = np.diff(stamps)
+        assert np.all(gaps > 0) and np.all(gaps % 20_000_000 == 0), gaps
 
         # A command in command_joints order (URDF order) is applied: it comes back as effort.
         command = [5.0, -40.0, 12.0]
@@ -120,32 +126,33 @@ def test_wall_time_robot_rate_stamps_names_command_and_timeout(graph, tmp_path):
             graph.spin_for(0.01)
             assert time.monotonic() - t_cmd < 10.0, "command never applied"
         # The arm moves once released.
-        graph.spin_for(0.1)
-        moved = peer.by_name(peer.states[-1][1], "position")
-        assert moved["joint_2"] != position["joint_2"]
+        graph.spin_until(
+            lambda: peer.by_name(peer.states[-1][1], "position")["joint_2"] != position["joint_2"],
+            10,
+            "the arm released",
+        )
 
         # No command for command_timeout: zero effort (the hardware's safety timeout), not before.
         graph.spin_until(
             lambda: all(v == 0.0 for v in peer.states[-1][1].effort), 10, "zero effort"
         )
         assert time.monotonic() - t_last >= 0.2
-        # A bad command is rejected, never applied.
-        # (Spaced: SystemDefaultsQoS keeps only the newest message with FastDDS, as
-        # forward_command_controller needs.)
-        peer.command([1.0, 2.0])
-        graph.spin_for(0.2)
-        peer.command([1.0, float("nan"), 3.0])
-        graph.spin_for(0.2)
+        # A bad command is rejected, never applied; /diagnostics counts them (once a second).
+        # (One at a time: SystemDefaultsQoS keeps only the newest message with FastDDS, as
+        # forward_command_controller needs, so a second sent before the first is taken would
+        # replace it.)
+        for n, bad in enumerate(([1.0, 2.0], [1.0, float("nan"), 3.0]), start=1):
+            peer.command(bad)
+            graph.spin_until(
+                lambda n=n: peer.diagnostics and int(peer.diagnostics[-1].get("rejected", 0)) >= n,
+                10,
+                f"diagnostics with {n} rejected command(s)",
+            )
         assert all(v == 0.0 for v in peer.states[-1][1].effort)
-        # /diagnostics counts them (published once a second).
-        graph.spin_until(
-            lambda: peer.diagnostics and int(peer.diagnostics[-1].get("rejected", 0)) >= 2,
-            10,
-            "diagnostics with the rejected commands",
-        )
         counts = peer.diagnostics[-1]
         assert int(counts["rejected"]) == 2
-        assert int(counts["commands"]) >= 1 and int(counts["timeouts"]) == 1
+        # (more than one timeout if the test's own command loop above stalled 0.2 s)
+        assert int(counts["commands"]) >= 1 and int(counts["timeouts"]) >= 1
         assert int(counts["clipped"]) == 0
 
 
@@ -337,6 +344,8 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
             "engine:=mujoco",
             "sim_time:=true",
             "state_rate:=100.0",
+            # never a step without its command, however late the controllers answer
+            "sim_wait_s:=30.0",
             "payload.mass_kg:=2.268",
             f"q_initial_deg:={list(PAPER_START_DEG)}",
         ) as proc,
