@@ -23,6 +23,7 @@ import pytest
 import rclpy
 from hypothesis import HealthCheck, Phase, given, settings
 from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from support.arm import NAMES, ROBOT, T_NS, N
 from support.capture import Capture, assert_all_finite, compare_with_offline
@@ -40,6 +41,7 @@ from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_lab.experiment import RunSpec
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
+from apc_plant_sim.intake import Source
 from apc_plant_sim.node import PlantNode
 
 pytestmark = pytest.mark.ros
@@ -396,39 +398,52 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert errors(plant) == 0
 
 
-#: Period of the slow real-time plant the two tests below drive by hand (0.1 s).
+#: Period of the real-time plant the test below drives by hand on its own /clock (0.1 s).
 SLOW_PERIOD_NS = 100_000_000
 
 
-def _slow_realtime_plant(graph: Any) -> tuple[Any, Any, Any, dict]:
-    """A real-time plant at 10 Hz with the test playing both controllers, after sample 0."""
+def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(graph):
+    """Real time on a ``/clock`` the test moves, the test playing both controllers: u_n(1),
+    sent with u_n(0) (the feedforward's lookahead), waits for sample 1; sample 0 applies
+    u_n(0). The clock moves a period once the plant holds the torques sent, so nothing here
+    depends on how fast the machine delivers them."""
     params = RunSpec(paper_scenario("a"), "none", mode="realtime").node_parameters()["plant_node"]
     params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
+    params.update(use_sim_time=True, publish_clock=False)
     ff_pub, fb_pub, states = stand_in_controllers(graph)
+    clock_pub = graph.nodes[-1].create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
     plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(params)))
-    graph.spin_until(lambda: 0 in states, what="sample 0")
-    return plant, ff_pub, fb_pub, states
+    now_ns = 0
 
+    def tick() -> None:
+        nonlocal now_ns
+        now_ns += SLOW_PERIOD_NS
+        clock_pub.publish(ClockMsg(clock=wire.ns_to_stamp(now_ns)))
 
-def _applied_before(graph: Any, states: dict, k: int) -> np.ndarray:
-    """The torque joint state k reports as applied over the period before it."""
-    stamp = k * SLOW_PERIOD_NS
-    graph.spin_until(lambda: stamp in states, what=f"sample {k}")
-    return wire.joint_state_to_arrays(states[stamp], NAMES, require=("effort",)).effort
+    deadline = time.monotonic() + 30
+    while 0 not in states:  # the plant waits for its peers, then sends sample 0 at a tick
+        assert time.monotonic() < deadline, "sample 0"
+        tick()
+        graph.spin_for(0.02)
 
+    def step_once_held(*held: tuple[Source, int], k: int) -> np.ndarray:
+        """Tick once the plant holds ``held``; the torque joint state ``k`` reports applied."""
+        graph.spin_until(lambda: all(plant.intake.holds(*h) for h in held), what=f"{held}")
+        tick()
+        stamp = k * SLOW_PERIOD_NS
+        graph.spin_until(lambda: stamp in states, what=f"sample {k}")
+        return wire.joint_state_to_arrays(states[stamp], NAMES, require=("effort",)).effort
 
-def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(graph):
-    """Real time, the test playing both controllers: u_n(1), sent with u_n(0) (the
-    feedforward's lookahead), waits for sample 1; sample 0 applies u_n(0)."""
-    plant, ff_pub, fb_pub, states = _slow_realtime_plant(graph)
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
     torque(ff_pub, 0, a)
     torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead
     torque(fb_pub, 0, np.zeros(N))
-    np.testing.assert_array_equal(_applied_before(graph, states, 1), a)
+    held = ((Source.NOMINAL, 0), (Source.NOMINAL, SLOW_PERIOD_NS), (Source.FEEDBACK, 0))
+    np.testing.assert_array_equal(step_once_held(*held, k=1), a)
     torque(fb_pub, SLOW_PERIOD_NS, np.ones(N))
-    np.testing.assert_array_equal(_applied_before(graph, states, 2), b + 1.0)
+    np.testing.assert_array_equal(step_once_held((Source.FEEDBACK, SLOW_PERIOD_NS), k=2), b + 1.0)
     assert counter(plant, "rejected") == 0 and counter(plant, "watchdog_trips") == 0
+    assert counter(plant, "late_samples") == 0
     assert errors(plant) == 0
 
 

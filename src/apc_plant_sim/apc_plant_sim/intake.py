@@ -178,6 +178,17 @@ class TorqueIntake:
         stamp = k * self.period_ns
         return self.pending[Source.NOMINAL].pop(stamp) + self.pending[Source.FEEDBACK].pop(stamp)
 
+    def holds(self, source: Source, stamp_ns: int) -> bool:
+        """Whether the torque of ``source`` answering the sample stamped ``stamp_ns`` is held:
+        pending (lockstep), the latest or kept ahead (real time). For a driver of the plant's
+        clock that steps once the plant has what it needs (a simulated-time test)."""
+        if self.lockstep:
+            return stamp_ns in self.pending[source]
+        latest = self.latest[source]
+        if latest is not None and latest[0] == stamp_ns:
+            return True
+        return source is Source.NOMINAL and stamp_ns in self.ahead
+
     # -- real time ------------------------------------------------------------------------------
     def _promote_ahead(self, k: int) -> None:
         """The newest nominal torque sent ahead whose sample has come is the latest."""

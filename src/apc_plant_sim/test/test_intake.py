@@ -113,9 +113,20 @@ def test_real_time_applies_a_nominal_torque_sent_ahead_at_its_own_sample():
     got.take(NOMINAL, 0, A, 0)
     assert got.take(NOMINAL, T, B, 0) is Filed.AHEAD
     got.take(FEEDBACK, 0, np.zeros(N), 0)
+    assert got.holds(NOMINAL, 0) and got.holds(NOMINAL, T) and got.holds(FEEDBACK, 0)
+    assert not got.holds(FEEDBACK, T) and not got.holds(NOMINAL, 2 * T)
     assert_array_equal(got.tick(0).tau, A)
     got.take(FEEDBACK, T, np.ones(N), 1)
     assert_array_equal(got.tick(1).tau, B + 1.0)
+    assert got.holds(NOMINAL, T) and not got.holds(NOMINAL, 0)  # promoted: the latest
+
+
+@pytest.mark.parametrize("lockstep", [True, False])
+def test_holds_says_which_answers_are_in(lockstep):
+    got = intake(lockstep)
+    assert not got.holds(NOMINAL, 0) and not got.holds(FEEDBACK, 0)
+    got.take(FEEDBACK, 0, A, 0)
+    assert got.holds(FEEDBACK, 0) and not got.holds(NOMINAL, 0)
 
 
 def test_real_time_starts_when_the_nominal_torque_ahead_overtakes_sample_0():
