@@ -132,6 +132,8 @@ def test_lockstep_missing_peer_ends_with_a_clear_error(graph):
     assert time.monotonic() - t0 >= 1.0
     assert plant.exit_code == 1
     assert "no publisher on feedback/torque" in plant.diagnostics.message
+    # (its writer keeps a deep history: a reader matched late on its side gets every sample)
+    assert plant.js_pub.qos_profile.depth == wire.CONTROL_WRITER_DEPTH
 
 
 def test_lockstep_peer_dying_mid_run_ends_with_a_clear_error(graph):

@@ -66,6 +66,7 @@ class FeedbackNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
+        out_qos = wire.writer_qos(qos)
         # The preset first: it gives the adaptive.* parameters their defaults.
         preset = declare(self, (PRESET_PARAM,))[PRESET_PARAM.name]
         values = declare(self, preset_rows(PARAMS, preset))
@@ -83,8 +84,8 @@ class FeedbackNode(Node):
         self._torque_msg = JointState()
         self._estimate_msg = Float64MultiArray()
 
-        self.torque_pub = matched_publisher(self, JointState, wire.FEEDBACK_TORQUE, qos)
-        self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, qos)
+        self.torque_pub = matched_publisher(self, JointState, wire.FEEDBACK_TORQUE, out_qos)
+        self.estimate_pub = self.create_publisher(Float64MultiArray, wire.ESTIMATE, out_qos)
         diag = self.diagnostics
         for msg_type, topic, callback in (
             (JointState, wire.JOINT_STATES, self._on_joint_state),

@@ -231,11 +231,12 @@ class RobotNode(LifecycleNode):
         self._setpoint_msg = JointTrajectory()
         self._command_msg = Float64MultiArray()
         qos = wire.CONTROL_QOS
+        out_qos = wire.writer_qos(qos)
         self.command_pub = self.create_publisher(
             Float64MultiArray, topic, QoSPresetProfiles.SYSTEM_DEFAULT.value
         )
-        self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, qos)
-        self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, qos)
+        self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, out_qos)
+        self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, out_qos)
         # Best effort matches a driver's reliable and best-effort publishers alike; only the
         # newest state is ever used.
         states = self.create_subscription(

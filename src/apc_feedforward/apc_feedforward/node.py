@@ -87,6 +87,7 @@ class FeedforwardNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         qos = qos or wire.CONTROL_QOS
+        out_qos = wire.writer_qos(qos)
         values = declare(self, PARAMS)
         self.controller_robot = controller_robot_from_params(values)
         self.joint_names = self.controller_robot.joint_names
@@ -99,8 +100,8 @@ class FeedforwardNode(Node):
         self._setpoint_msg = JointTrajectory()
         self._torque_msg = JointState()
 
-        self.setpoint_pub = matched_publisher(self, JointTrajectory, wire.SETPOINT, qos)
-        self.torque_pub = matched_publisher(self, JointState, wire.FEEDFORWARD_TORQUE, qos)
+        self.setpoint_pub = matched_publisher(self, JointTrajectory, wire.SETPOINT, out_qos)
+        self.torque_pub = matched_publisher(self, JointState, wire.FEEDFORWARD_TORQUE, out_qos)
         diag = self.diagnostics
         self.create_subscription(
             JointState,

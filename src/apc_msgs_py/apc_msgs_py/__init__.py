@@ -30,6 +30,9 @@ Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and 
 - ``CLOCK`` (absolute): ``rosgraph_msgs/Clock``, :data:`CLOCK_QOS`
 - ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
 
+The control topics' writers keep a deeper history (:func:`writer_qos`,
+:data:`CONTROL_WRITER_DEPTH`): a reader matched late on its side still gets every sample.
+
 Conventions
 -----------
 - Time is integer nanoseconds everywhere. Sample ``k`` is stamped ``k * T`` computed in integers
@@ -85,6 +88,7 @@ from apc_msgs_py.topics import (
     CLOCK,
     CLOCK_QOS,
     CONTROL_QOS,
+    CONTROL_WRITER_DEPTH,
     DIAGNOSTICS,
     DIAGNOSTICS_QOS,
     ESTIMATE,
@@ -101,12 +105,14 @@ from apc_msgs_py.topics import (
     TRAJECTORY_GOAL_QOS,
     TopicSpec,
     topic_spec,
+    writer_qos,
 )
 
 __all__ = [
     "CLOCK",
     "CLOCK_QOS",
     "CONTROL_QOS",
+    "CONTROL_WRITER_DEPTH",
     "DEFAULT_MAX_ABS",
     "DIAGNOSTICS",
     "DIAGNOSTICS_QOS",
@@ -152,4 +158,5 @@ __all__ = [
     "theta_t_to_estimate_msg",
     "topic_spec",
     "torque_to_msg",
+    "writer_qos",
 ]

@@ -54,6 +54,33 @@ CONTROL_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
+#: History a control topic's writer keeps (its readers keep :data:`CONTROL_QOS`'s 10).
+#: Discovery matches a writer and a reader in two handshakes, each side in its own time: on a
+#: loaded machine the reader's side can come tens of ms after the writer's, while the writer is
+#: already publishing to it (the plant starts once it counts its subscribers: the writer's
+#: side). What the reader dropped meanwhile the writer repairs once both sides are matched, from
+#: its history: with 10, a recorder whose side matched ~22 samples into a lockstep run recorded
+#: 28 of the first 40 joint states (samples 12 on). 1000 covers seconds of lockstep.
+CONTROL_WRITER_DEPTH = 1000
+
+
+def writer_qos(qos: QoSProfile) -> QoSProfile:
+    """``qos`` for a control topic's writer: a RELIABLE KEEP_LAST history at least
+    :data:`CONTROL_WRITER_DEPTH` deep (see there); a best-effort or KEEP_ALL one unchanged."""
+    if (
+        qos.reliability != ReliabilityPolicy.RELIABLE
+        or qos.history != HistoryPolicy.KEEP_LAST
+        or qos.depth >= CONTROL_WRITER_DEPTH
+    ):
+        return qos
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=CONTROL_WRITER_DEPTH,
+        reliability=qos.reliability,
+        durability=qos.durability,
+    )
+
+
 #: ``/clock``: KEEP_LAST 1, BEST_EFFORT, VOLATILE -- what rclpy's ``TimeSource`` subscribes with
 #: (and ``rclcpp::ClockQoS``). Only the newest time matters; lockstep does not depend on the clock
 #: arriving (samples are matched by their stamps), a dropped clock message only delays ``now()``.

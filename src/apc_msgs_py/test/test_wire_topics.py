@@ -113,6 +113,16 @@ def test_qos_constants(qos, reliability, durability, history, depth):
 # ----------------------------------------------------------------------------------------------
 # Time
 # ----------------------------------------------------------------------------------------------
+def test_control_writers_keep_a_deep_history_and_best_effort_stays_as_it_is():
+    deep = wire.writer_qos(wire.CONTROL_QOS)
+    assert deep.depth == wire.CONTROL_WRITER_DEPTH > wire.CONTROL_QOS.depth
+    assert deep.reliability == ReliabilityPolicy.RELIABLE
+    assert deep.durability == DurabilityPolicy.VOLATILE  # a late joiner gets nothing old
+    assert deep.history == HistoryPolicy.KEEP_LAST
+    assert wire.writer_qos(wire.CLOCK_QOS) is wire.CLOCK_QOS
+    assert wire.writer_qos(deep) is deep
+
+
 def test_sample_stamps_are_exact_integer_ns_for_an_hour_at_100_hz():
     period = wire.seconds_to_ns(0.01)
     assert period == 10_000_000

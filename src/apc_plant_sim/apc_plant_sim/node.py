@@ -154,7 +154,7 @@ class PlantNode(Node):
         self._js_msg = JointState()
         self._clock_msg = ClockMsg()
 
-        self.js_pub = self.create_publisher(JointState, wire.JOINT_STATES, qos)
+        self.js_pub = self.create_publisher(JointState, wire.JOINT_STATES, wire.writer_qos(qos))
         self.description_pub = publish_robot_description(self, urdf_xml(values))
         self.clock_pub = (
             self.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
