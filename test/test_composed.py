@@ -37,8 +37,9 @@ def _params_file(tmp_path: Path, spec: RunSpec, **plant: object) -> Path:
     return write_params(tmp_path / "params.yaml", params)
 
 
-def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
-    """Joint states by stamp until the plant's process (the last of ``procs``) exits."""
+def _observe(graph, procs: list[subprocess.Popen], n_states: int) -> dict[int, JointState]:
+    """Joint states by stamp until the plant's process (the last of ``procs``) exits and
+    ``n_states`` are in (the last ones may still be on their way when it has)."""
     states: dict[int, JointState] = {}
     node = graph.add(rclpy.create_node("observer", context=graph.context))
     observer = node.create_subscription(
@@ -58,7 +59,7 @@ def _observe(graph, procs: list[subprocess.Popen]) -> dict[int, JointState]:
     while procs[-1].poll() is None:
         assert time.monotonic() < deadline, "the run did not end"
         graph.spin_for(0.05)
-    graph.spin_for(0.3)
+    graph.spin_until(lambda: len(states) >= n_states, 30.0, f"{n_states} joint states")
     return states
 
 
@@ -83,7 +84,7 @@ def test_composed_arm_lockstep_equals_offline(tmp_path, graph):
     params = _params_file(tmp_path, spec, wait_for_subscribers=4)
     argv = [str(BIN / "composed"), "--ros-args", "--params-file", str(params)]
     with node_process(argv, tmp_path / "arm.log", with_stdout=True) as arm:
-        states = _observe(graph, [arm])
+        states = _observe(graph, [arm], scenario.n_samples + 1)
         assert arm.returncode == 0, (tmp_path / "arm.log").read_text()[-2000:]
         _check_against_offline(states, scenario, settings)
 
@@ -104,7 +105,7 @@ def test_controllers_only_run_against_a_plant_process(tmp_path, graph):
             [str(BIN / "plant_node"), *cmd], tmp_path / "plant.log", with_stdout=True
         ) as plant,
     ):
-        states = _observe(graph, [controllers, plant])
+        states = _observe(graph, [controllers, plant], scenario.n_samples + 1)
         assert plant.returncode == 0, (tmp_path / "plant.log").read_text()[-2000:]
         assert controllers.poll() is None  # the controllers run until stopped
         _check_against_offline(states, scenario, settings)

@@ -26,7 +26,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from support.arm import NAMES, ROBOT, T_NS, N
-from support.capture import Capture, assert_all_finite, compare_with_offline
+from support.capture import Capture, assert_all_finite, compare_with_offline, has_whole_run
 from support.fuzz import BATCH, Garbage, extreme_goal
 from support.graph import Graph
 from support.nodes import counter, errors, overrides, recorded_diagnostics
@@ -150,10 +150,12 @@ def test_fuzz_garbage_on_every_topic_leaves_a_lockstep_run_bit_identical(graph):
     inject()
     graph.spin_until(lambda: plant.done, timeout_s=60, what="the end of the run")
     assert plant.exit_code == 0, plant.diagnostics.message
-    graph.spin_for(0.2)  # the final sample's torques reach the capture
+    offline = run_offline(scenario, "adaptive", settings_)
+    # the final sample's answers may still be on their way to the capture
+    graph.spin_until(lambda: has_whole_run(capture, len(offline.t)), 30, "the last answers")
     assert injected["n"] >= 2000, injected
     assert_all_finite(capture)
-    compare_with_offline(capture, run_offline(scenario, "adaptive", settings_))
+    compare_with_offline(capture, offline)
     # The counters are on a real /diagnostics message (published once a second).
     graph.spin_until(
         lambda: all(

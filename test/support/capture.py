@@ -113,6 +113,17 @@ def assert_all_finite(capture: Capture) -> None:
                     assert np.all(np.abs(values) <= wire.DEFAULT_MAX_ABS), (topic, stamp)
 
 
+def has_whole_run(capture: Capture, n: int) -> bool:
+    """Every sample of an ``n``-state lockstep run is in: its joint states, feedback torques and
+    estimates, and the feedforward's outputs, one sample ahead (what
+    :func:`compare_with_offline` compares)."""
+    own = (wire.JOINT_STATES, wire.FEEDBACK_TORQUE, wire.ESTIMATE)
+    ahead = (wire.SETPOINT, wire.FEEDFORWARD_TORQUE)
+    return all(len(capture.first(t)) >= n for t in own) and all(
+        len(capture.first(t)) >= n + 1 for t in ahead
+    )
+
+
 def compare_with_offline(capture: Capture, offline: Any) -> None:
     """Bit for bit: every captured signal equals the offline loop's (the clean run)."""
     n = len(offline.t)
