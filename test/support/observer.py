@@ -29,7 +29,8 @@ class Observer:
     ``states``: ``(wall, stamp_ns, q, qd, effort)`` per ``joint_states``; ``ff``: ``{stamp:
     u_n}``; ``fb``: ``{stamp: du}``; ``diag``: ``(wall, level, message, values)`` of the
     plant's ``/diagnostics``;
-    ``raw``: ``{(topic, key): [bytes, ...]}`` of every message when ``raw=True``.
+    ``raw``: ``{(topic, key): [bytes, ...]}`` of every message when ``raw=True`` (the joint
+    states and torques then also in ``states``, ``ff``, ``fb``).
     """
 
     def __init__(self, raw: bool = False, states: bool = True) -> None:
@@ -46,7 +47,16 @@ class Observer:
         # A deep reader queue: the observer is the reference, it must not drop what it is slow
         # to take (KEEP_LAST 10 dropped five joint states once on a loaded machine).
         qos = deep(wire.CONTROL_QOS)
+        self._typed = {}
         if raw:
+            self._typed = {
+                self.node.resolve_topic_name(topic): callback
+                for topic, callback in (
+                    (wire.JOINT_STATES, self._on_state),
+                    (wire.FEEDFORWARD_TORQUE, self._on_ff),
+                    (wire.FEEDBACK_TORQUE, self._on_fb),
+                )
+            }
             for spec in wire.TOPICS:
                 topic = self.node.resolve_topic_name(spec.name)
                 self.node.create_subscription(
@@ -96,6 +106,9 @@ class Observer:
         if topic == "/diagnostics":  # three writers: order is only defined per writer
             key = deserialize_message(data, cls).status[0].name
         self.raw.setdefault((topic, key), []).append((time.monotonic(), bytes(data)))
+        typed = self._typed.get(topic)  # the joint states and torques are also kept decoded
+        if typed is not None:
+            typed(deserialize_message(data, cls))
 
     # -- spinning -------------------------------------------------------------------------------
     def spin_for(self, seconds: float) -> None:
