@@ -434,13 +434,15 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
     with _controllers(tmp_path, use_sim_time=True, path_tolerance=[0.0002]):
         graph.spin_until(lambda: len(driver.commands) > 20, 30, "commands")
         # no joint states (the clock runs on): one gravity hold, then silence
+        n = len(driver.commands)
         driver.pause()
-        _spin_sim(graph, driver, 0.15)
+        graph.spin_until(lambda: diag.count("watchdog") == 1, 30, "watchdog on /diagnostics")
+        assert "watchdog" in diag.values["message"]
+        _spin_until_quiet(graph, driver, 0.5)  # the hold (and commands sent before) arrive
+        assert len(driver.commands) > n
         n = len(driver.commands)
         _spin_sim(graph, driver, 0.15)
         assert len(driver.commands) == n
-        graph.spin_until(lambda: diag.count("watchdog") == 1, 10, "watchdog on /diagnostics")
-        assert "watchdog" in diag.values["message"]
         # states back: the arm (sagging under the hold) is stopped near where it is then
         driver.pause(False)
         q_back = driver.q_deg()
