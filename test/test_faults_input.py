@@ -400,8 +400,8 @@ def test_plant_rejects_or_ignores_torques_with_wrong_stamps_and_clips_huge_ones(
     assert errors(plant) == 0
 
 
-#: Period of the real-time plant the test below drives by hand on its own /clock (0.1 s).
-SLOW_PERIOD_NS = 100_000_000
+#: Period of the real-time plant the test below steps by hand on its own /clock (0.1 s).
+STEPPED_PERIOD_NS = 100_000_000
 
 
 def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(graph):
@@ -413,37 +413,45 @@ def test_realtime_plant_applies_a_nominal_torque_sent_ahead_at_its_own_sample(gr
     params.update(wait_for_subscribers=1, n_samples=0, period=0.1, step=0.025, watchdog_s=1.0)
     params.update(use_sim_time=True, publish_clock=False)
     ff_pub, fb_pub, states = stand_in_controllers(graph)
-    clock_pub = graph.nodes[-1].create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
+    clock_node = graph.add(rclpy.create_node("test_clock", context=graph.context))
+    clock_pub = clock_node.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
     plant = graph.add(PlantNode(context=graph.context, parameter_overrides=overrides(params)))
     now_ns = 0
 
-    def tick() -> None:
+    def tick_until(done, what: str, advance: bool = True) -> None:
+        """Move the clock a period (or keep saying the time), until ``done()``: /clock is best
+        effort, a message may be dropped."""
         nonlocal now_ns
-        now_ns += SLOW_PERIOD_NS
-        clock_pub.publish(ClockMsg(clock=wire.ns_to_stamp(now_ns)))
+        deadline = time.monotonic() + 30
+        while not done():
+            assert time.monotonic() < deadline, what
+            if advance:
+                now_ns += STEPPED_PERIOD_NS
+            clock_pub.publish(ClockMsg(clock=wire.ns_to_stamp(now_ns)))
+            graph.spin_for(0.02)
 
-    deadline = time.monotonic() + 30
-    while 0 not in states:  # the plant waits for its peers, then sends sample 0 at a tick
-        assert time.monotonic() < deadline, "sample 0"
-        tick()
-        graph.spin_for(0.02)
+    # The plant waits for its peers, then sends sample 0 at a tick.
+    tick_until(lambda: 0 in states, "sample 0")
 
     def step_once_held(*held: tuple[Source, int], k: int) -> np.ndarray:
         """Tick once the plant holds ``held``; the torque joint state ``k`` reports applied."""
+        nonlocal now_ns
         graph.spin_until(lambda: all(plant.intake.holds(*h) for h in held), what=f"{held}")
-        tick()
-        stamp = k * SLOW_PERIOD_NS
-        graph.spin_until(lambda: stamp in states, what=f"sample {k}")
+        now_ns += STEPPED_PERIOD_NS
+        stamp = k * STEPPED_PERIOD_NS
+        tick_until(lambda: stamp in states, f"sample {k}", advance=False)
         return wire.joint_state_to_arrays(states[stamp], NAMES, require=("effort",)).effort
 
     a, b = np.array([5.0, 40.0, 10.0]), np.array([-5.0, 30.0, 2.0])
     torque(ff_pub, 0, a)
-    torque(ff_pub, SLOW_PERIOD_NS, b)  # ahead
+    torque(ff_pub, STEPPED_PERIOD_NS, b)  # ahead
     torque(fb_pub, 0, np.zeros(N))
-    held = ((Source.NOMINAL, 0), (Source.NOMINAL, SLOW_PERIOD_NS), (Source.FEEDBACK, 0))
+    held = ((Source.NOMINAL, 0), (Source.NOMINAL, STEPPED_PERIOD_NS), (Source.FEEDBACK, 0))
     np.testing.assert_array_equal(step_once_held(*held, k=1), a)
-    torque(fb_pub, SLOW_PERIOD_NS, np.ones(N))
-    np.testing.assert_array_equal(step_once_held((Source.FEEDBACK, SLOW_PERIOD_NS), k=2), b + 1.0)
+    torque(fb_pub, STEPPED_PERIOD_NS, np.ones(N))
+    np.testing.assert_array_equal(
+        step_once_held((Source.FEEDBACK, STEPPED_PERIOD_NS), k=2), b + 1.0
+    )
     assert counter(plant, "rejected") == 0 and counter(plant, "watchdog_trips") == 0
     assert counter(plant, "late_samples") == 0
     assert errors(plant) == 0

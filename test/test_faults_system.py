@@ -374,16 +374,17 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
             cmd, stdout=subprocess.DEVNULL, stderr=err, start_new_session=True
         )
     try:
-        # 40 seen, 30 required in the file: samples still in flight to the recorder when the
-        # signal lands may be missing from it. The recorder's side of its match with the plant
-        # may come after the plant's (which starts the run): once it has, the plant's writer
-        # repairs what the recorder dropped meanwhile (apc_msgs_py.CONTROL_WRITER_DEPTH).
+        # The recorder's side of its match with the plant may come after the plant's (which
+        # starts the run): the plant's writer then repairs what the recorder dropped meanwhile
+        # (apc_msgs_py.CONTROL_WRITER_DEPTH). The signal comes 40 samples after the recorder
+        # says it hears the plant; 30 required in the file, from sample 0: samples still in
+        # flight to the recorder when the signal lands may be missing from it.
         heard = f"/{wire.JOINT_STATES}: 1 publisher"
-
-        def running() -> bool:
-            return len(obs.ff) >= 40 and heard in (tmp_path / "runner.err").read_text()
-
-        obs.spin_until(running, 60, "the run, recorded", [runner])
+        obs.spin_until(
+            lambda: heard in (tmp_path / "runner.err").read_text(), 60, "the run", [runner]
+        )
+        seen = len(obs.ff)
+        obs.spin_until(lambda: len(obs.ff) >= seen + 40, 60, "40 samples on", [runner])
         t0 = time.monotonic()
         runner.send_signal(sig)
         with contextlib.suppress(subprocess.TimeoutExpired):
@@ -405,6 +406,9 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
         assert "Traceback" not in stderr, stderr[-2000:]
         info = bag_info(out / "sig.mcap")
         assert info["complete"] is True
+        states = read_messages(out / "sig.mcap", topics=["/joint_states"])
+        first = min(wire.stamp_to_ns(m.decode().header.stamp) for m in states)
+        assert first == 0, f"the recording's first state: {first} ns"
         return {topic: t["message_count"] for topic, t in info["topics"].items()}
     finally:
         obs.close()
@@ -422,12 +426,8 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
 @SIGNALS
 def test_experiment_runner_stops_on_signal_within_2s(tmp_path, sig, processes):
     """The runner ends within 2 s, leaves no process of its group, and finishes its recording
-    with the samples seen on the wire.
-
-    (A recording short of its first joint states, 0 or 28 of 40, came in about one full-suite
-    run in four while the plant's writer kept 10 samples: the recorder's side of the match came
-    after the plant had started, and what the writer still held when it did was all it got.)
-    """
+    with the samples seen on the wire, from sample 0 on (the plant's writer repairs what the
+    recorder dropped before its side of the match: apc_msgs_py.CONTROL_WRITER_DEPTH)."""
     counts = _stop_runner_by_signal(tmp_path, sig, processes)
     assert counts["/joint_states"] >= 30, counts
 
@@ -445,8 +445,8 @@ def test_killed_recorder_keeps_an_exact_prefix_of_the_run(tmp_path):
     Real time on a ``/clock`` the test moves (:mod:`support.sim_clock`), the recorder on it too:
     its chunks close by log time, so the open chunk spans at most ``max_chunk_interval_s`` of
     samples, whatever the machine's load. The clock stops at a sample anywhere within a chunk;
-    the recorder is killed after it has had a second to take what was sent (on the frozen
-    clock nothing it takes then closes the chunk).
+    the recorder is killed after it has had a second to take what was sent (the wait adds no
+    log time: the open chunk spans what it did when the clock stopped).
     """
     from rosbags.highlevel import AnyReader
 

@@ -12,7 +12,6 @@ docs/reliability.md. (Dying nodes, signals, a killed recorder: ``test_faults_sys
 from __future__ import annotations
 
 import os
-import subprocess
 import time
 from pathlib import Path
 
@@ -59,9 +58,11 @@ def _run_across_link(
 
     ``stepped``: real time on a ``/clock`` that a stepper beside the plant moves one period at
     a time once it has seen both controllers' answers to the last joint state
-    (``python -m support.sim_clock``): the link's delay no longer matters, its losses still do
-    (the plant takes torques best effort and a lost one is not repaired for it, while the
-    stepper's reliable reader has it repaired), whatever the machine's load.
+    (``python -m support.sim_clock``): the link's losses count (the plant takes torques best
+    effort and a lost one is not repaired for it, while the stepper's reliable reader has it
+    repaired); its delay counts only where the plant's copy of a torque arrives after the
+    stepper's (a separate packet), which the load varies: 6-14 of 151 measured, well inside
+    the 2x bound.
 
     Returns the plant's exit code, the recording and the plant's stderr.
     """
@@ -128,18 +129,21 @@ def _run_across_link(
             lookahead = params["feedforward_node"].get("lookahead", 1)
             _start_stepper(kids, a, round(scenario.period * 1e9), lookahead, scenario.n_samples)
         plant = kids.start("plant_node", **a)
-        try:
-            plant.wait(60)
-        except subprocess.TimeoutExpired:
-            hung = True
-        else:
-            hung = False
+        stepper = kids.procs.get("clock")
+        deadline = time.monotonic() + 60
+        while plant.poll() is None and time.monotonic() < deadline:
+            if stepper is not None and stepper.poll() is not None:
+                break  # the clock stopped: the plant would wait for ever
+            time.sleep(0.05)
+        hung = plant.poll() is None
+        if not hung:
             time.sleep(0.5)  # the last torques reach the recorder
     finally:
         kids.close()
     if hung:
+        clock = f"; the clock stepper's stderr: {kids.stderr('clock')[-1500:]}" if stepped else ""
         pytest.fail(
-            f"{name}: the plant did not end within 60 s; its counters {_plant_counters(bag)}; "
+            f"{name}: the plant did not end; its counters {_plant_counters(bag)}{clock}; "
             f"its stderr: {kids.stderr('plant_node')[-1500:]}"
         )
     return plant.returncode, bag, kids.stderr("plant_node")
@@ -173,10 +177,10 @@ def _plant_counters(bag: Path) -> dict[str, str]:
 def test_network_namespaces_with_delay_and_loss(tmp_path):
     """Across 2 ms +- 0.5 ms delay and 1 % loss (each way): real time at 100 Hz on a clock
     stepped beside the plant keeps case (c) within 2x of the lossless offline loop's maximum
-    error (lost torques handled by the plant's rules); lockstep completes (reliable QoS) and
-    still equals the offline loop bit for bit; real time on wall time completes and records
-    its samples (its error is reported, not asserted: on wall time it depends on the machine's
-    load, as every wall-clock figure does).
+    error (lost and late torques handled by the plant's rules); lockstep completes (reliable
+    QoS) and still equals the offline loop bit for bit; real time on wall time completes and
+    records its samples (its error is reported, not asserted: on wall time it depends on the
+    machine's load, as every wall-clock figure does).
 
     Deployment settings for the lossy link (docs/reliability.md): the FastDDS profile
     :data:`FASTDDS_LOSSY_LINK_PROFILE` and ``watchdog_s`` = :data:`NETWORK_WATCHDOG_S`.
@@ -245,7 +249,7 @@ def test_network_namespaces_with_delay_and_loss(tmp_path):
     # On wall time: the run completes and its joint states are recorded (the plant and the
     # recorder share a namespace); how many set points crossed the link in time is load.
     assert wall["code"] == 0, wall["stderr"][-2000:]
-    assert wall["samples"] == stepped["samples"], summary
+    assert stepped["samples"] == wall["samples"] == scenario.n_samples + 1, summary
     lock = results["lockstep_netem"]
     if lock["code"] == 0:
         recorded = lock["run"]

@@ -394,7 +394,7 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         _spin_sim(graph, driver, 0.4)
         assert _change(graph, observer, Transition.TRANSITION_DEACTIVATE)
         driver.stop_waiting()
-        _spin_sim(graph, driver, 0.05)  # the gravity hold in flight
+        _spin_until_quiet(graph, driver, 0.5)  # the gravity hold (and any sent before) arrive
         n = len(driver.commands)
         _spin_sim(graph, driver, 0.2)
         assert len(driver.commands) == n

@@ -344,7 +344,8 @@ def test_apcs_controllers_drive_the_mujoco_robot_in_sim_time(graph, tmp_path):
             "engine:=mujoco",
             "sim_time:=true",
             "state_rate:=100.0",
-            # never a step without its command, however late the controllers answer
+            # a step waits up to 30 s of wall time for its command: a slow machine makes the
+            # run slower, not different
             "sim_wait_s:=30.0",
             "payload.mass_kg:=2.268",
             f"q_initial_deg:={list(PAPER_START_DEG)}",

@@ -10,6 +10,7 @@ what it is slow to take.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -47,7 +48,7 @@ class Observer:
         # A deep reader queue: the observer is the reference, it must not drop what it is slow
         # to take (KEEP_LAST 10 dropped five joint states once on a loaded machine).
         qos = deep(wire.CONTROL_QOS)
-        self._typed = {}
+        self._typed: dict[str, Any] = {}
         if raw:
             self._typed = {
                 self.node.resolve_topic_name(topic): callback

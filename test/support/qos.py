@@ -7,19 +7,15 @@ loaded machine lost five joint states once.
 
 from __future__ import annotations
 
-from rclpy.qos import HistoryPolicy, QoSProfile
+from rclpy.qos import QoSProfile
 
 import apc_msgs_py as wire
 
 
 def deep(qos: QoSProfile, depth: int = 1000) -> QoSProfile:
-    """``qos`` with a KEEP_LAST ``depth`` history (best effort stays best effort)."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=qos.reliability,
-        durability=qos.durability,
-    )
+    """``qos`` with a KEEP_LAST history at least ``depth`` deep (best effort stays best
+    effort)."""
+    return wire.with_depth(qos, depth)
 
 
 #: The control topics' QoS (reliable, volatile), 1000 deep: what a test's capturing node and

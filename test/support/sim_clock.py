@@ -45,6 +45,11 @@ class ClockStepper:
         self._msg = ClockMsg()
         self._pub = obs.node.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
 
+    def k(self) -> int:
+        """The newest joint state's sample index (-1 before the first)."""
+        states = self.obs.states
+        return states[-1][1] // self.period_ns if states else -1
+
     def answered(self, k: int, who: str) -> bool:
         """Joint state ``k``'s answer from ``who`` (:data:`FF` or :data:`FB`) has been seen."""
         if who == FF:
@@ -68,7 +73,7 @@ class ClockStepper:
         deadline = time.monotonic() + timeout_s
         while True:
             assert time.monotonic() < deadline, f"the run did not start within {timeout_s} s"
-            k = self.obs.k()
+            k = self.k()
             if k >= 1:
                 self._spin_until(lambda k=k: self.answered(k, FF) and self.answered(k, FB), 5.0)
                 if self.answered(k, FF) and self.answered(k, FB):
@@ -76,7 +81,7 @@ class ClockStepper:
                 self.tick()  # an answer lost at start: the plant applies what it holds
             elif k == 0 and self.answered(0, FF) and self.answered(0, FB):
                 self.tick()
-                self._spin_until(lambda: self.obs.k() >= 1, 0.5)
+                self._spin_until(lambda: self.k() >= 1, 0.5)
             else:
                 self.tick()
                 self._spin_until(lambda: False, 0.02)
@@ -84,14 +89,14 @@ class ClockStepper:
     def step(self, alive: tuple[str, ...] = (FF, FB), timeout_s: float = 30.0) -> int:
         """One period: tick, then wait for the next joint state and the answers to it of the
         controllers ``alive``; the new sample's index."""
-        k = self.obs.k() + 1
+        k = self.k() + 1
         self.tick()
         deadline = time.monotonic() + timeout_s
         waited_for = time.monotonic() + 0.5
-        while not (self.obs.k() >= k and all(self.answered(k, who) for who in alive)):
+        while not (self.k() >= k and all(self.answered(k, who) for who in alive)):
             now = time.monotonic()
             assert now < deadline, (
-                f"sample {k}: state {self.obs.k()}, answered by "
+                f"sample {k}: state {self.k()}, answered by "
                 f"{[who for who in alive if self.answered(k, who)]} of {alive} in {timeout_s} s"
             )
             for proc in self.procs:
@@ -125,38 +130,41 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m support.sim_clock PERIOD_NS LOOKAHEAD N_SAMPLES``: step ``/clock`` for a
     plant in other processes until its last sample, then keep saying the last time until
     stopped (SIGINT/SIGTERM). For nodes the test's own observer cannot reach, e.g. in a network
-    namespace: the stepper runs beside the plant. Prints ``stepped K`` when the last sample is
-    reached (``listening`` once its readers exist); exits 1 if a step waits longer than its
-    bound."""
+    namespace: the stepper runs beside the plant. Prints ``listening`` once its readers exist
+    and ``stepped K`` when the last sample is reached; exits 1, saying why on stderr, if a step
+    waits longer than its bound, and 0 on SIGINT/SIGTERM."""
     import argparse
     import signal
+    import sys
 
     parser = argparse.ArgumentParser(prog="python -m support.sim_clock")
     parser.add_argument("period_ns", type=int)
     parser.add_argument("lookahead", type=int)
     parser.add_argument("n_samples", type=int)
     args = parser.parse_args(argv)
-    stop: list[int] = []
+
+    def stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, frame: stop.append(signum))
+        signal.signal(sig, stop)
     obs = Observer()
     try:
         clock = ClockStepper(obs, args.period_ns, args.lookahead)
         print("listening", flush=True)
         k = clock.start(timeout_s=120.0)
-        while k < args.n_samples - 1 and not stop:
+        while k < args.n_samples - 1:
             k = clock.step()
         clock.tick()  # the last sample: the plant applies its torques and ends
         print(f"stepped {k + 1}", flush=True)
-        while not stop:  # /clock is best effort: the plant may not have heard the last tick
-            clock._spin_until(lambda: bool(stop), 0.5)
+        while True:  # /clock is best effort: the plant may not have heard the last tick
+            clock._spin_until(lambda: False, 0.5)
             clock._publish()
     except AssertionError as exc:
-        print(f"sim_clock: {exc}", flush=True)
+        print(f"sim_clock: {exc}", file=sys.stderr, flush=True)
         return 1
     finally:
         obs.close()
-    return 0
 
 
 if __name__ == "__main__":

@@ -31,7 +31,8 @@ Topics (relative, so a namespace such as ``/puma`` moves a whole arm; clock and 
 - ``DIAGNOSTICS`` (absolute): ``diagnostic_msgs/DiagnosticArray``, :data:`DIAGNOSTICS_QOS`
 
 The control topics' writers keep a deeper history (:func:`writer_qos`,
-:data:`CONTROL_WRITER_DEPTH`): a reader matched late on its side still gets every sample.
+:data:`CONTROL_WRITER_DEPTH`): a reader matched late on its side still gets the samples it
+missed, up to that many.
 
 Conventions
 -----------
@@ -105,6 +106,7 @@ from apc_msgs_py.topics import (
     TRAJECTORY_GOAL_QOS,
     TopicSpec,
     topic_spec,
+    with_depth,
     writer_qos,
 )
 
@@ -158,5 +160,6 @@ __all__ = [
     "theta_t_to_estimate_msg",
     "topic_spec",
     "torque_to_msg",
+    "with_depth",
     "writer_qos",
 ]

@@ -6,6 +6,7 @@ diagnostics are global.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -54,31 +55,33 @@ CONTROL_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
-#: History a control topic's writer keeps (its readers keep :data:`CONTROL_QOS`'s 10).
+#: History a control topic's writer keeps (the nodes' readers keep :data:`CONTROL_QOS`'s 10).
 #: Discovery matches a writer and a reader in two handshakes, each side in its own time: on a
 #: loaded machine the reader's side can come tens of ms after the writer's, while the writer is
 #: already publishing to it (the plant starts once it counts its subscribers: the writer's
-#: side). What the reader dropped meanwhile the writer repairs once both sides are matched, from
-#: its history: with 10, a recorder whose side matched ~22 samples into a lockstep run recorded
-#: 28 of the first 40 joint states (samples 12 on). 1000 covers seconds of lockstep.
+#: side). Once both sides match, the writer repairs what the reader dropped meanwhile, from its
+#: history: a reader matched ``m`` samples late gets them all while ``m`` is below this depth
+#: (about a second of lockstep, 10 s at 100 Hz); with a depth of 10 it would get samples
+#: ``m - 10`` on.
 CONTROL_WRITER_DEPTH = 1000
 
 
+def with_depth(qos: QoSProfile, depth: int) -> QoSProfile:
+    """A copy of ``qos`` with a KEEP_LAST history at least ``depth`` deep; every other policy
+    as it is."""
+    deeper = copy.copy(qos)
+    deeper.history = HistoryPolicy.KEEP_LAST
+    deeper.depth = max(qos.depth, depth)
+    return deeper
+
+
 def writer_qos(qos: QoSProfile) -> QoSProfile:
-    """``qos`` for a control topic's writer: a RELIABLE KEEP_LAST history at least
-    :data:`CONTROL_WRITER_DEPTH` deep (see there); a best-effort or KEEP_ALL one unchanged."""
-    if (
-        qos.reliability != ReliabilityPolicy.RELIABLE
-        or qos.history != HistoryPolicy.KEEP_LAST
-        or qos.depth >= CONTROL_WRITER_DEPTH
-    ):
+    """``qos`` for a control topic's writer: a RELIABLE one with at least
+    :data:`CONTROL_WRITER_DEPTH` of KEEP_LAST history (see there); a best-effort or KEEP_ALL
+    one as it is."""
+    if qos.reliability != ReliabilityPolicy.RELIABLE or qos.history != HistoryPolicy.KEEP_LAST:
         return qos
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=CONTROL_WRITER_DEPTH,
-        reliability=qos.reliability,
-        durability=qos.durability,
-    )
+    return with_depth(qos, CONTROL_WRITER_DEPTH)
 
 
 #: ``/clock``: KEEP_LAST 1, BEST_EFFORT, VOLATILE -- what rclpy's ``TimeSource`` subscribes with

@@ -110,9 +110,6 @@ def test_qos_constants(qos, reliability, durability, history, depth):
     assert qos.depth == depth
 
 
-# ----------------------------------------------------------------------------------------------
-# Time
-# ----------------------------------------------------------------------------------------------
 def test_control_writers_keep_a_deep_history_and_best_effort_stays_as_it_is():
     deep = wire.writer_qos(wire.CONTROL_QOS)
     assert deep.depth == wire.CONTROL_WRITER_DEPTH > wire.CONTROL_QOS.depth
@@ -120,9 +117,24 @@ def test_control_writers_keep_a_deep_history_and_best_effort_stays_as_it_is():
     assert deep.durability == DurabilityPolicy.VOLATILE  # a late joiner gets nothing old
     assert deep.history == HistoryPolicy.KEEP_LAST
     assert wire.writer_qos(wire.CLOCK_QOS) is wire.CLOCK_QOS
-    assert wire.writer_qos(deep) is deep
+    assert wire.writer_qos(deep).depth == wire.CONTROL_WRITER_DEPTH
 
 
+def test_with_depth_copies_every_other_policy():
+    from rclpy.duration import Duration
+
+    qos = wire.with_depth(wire.CONTROL_QOS, 5)
+    assert qos.depth == wire.CONTROL_QOS.depth  # never shallower
+    original = wire.with_depth(wire.CONTROL_QOS, 10)
+    original.deadline = Duration(seconds=2)
+    deeper = wire.with_depth(original, 50)
+    assert deeper.depth == 50 and deeper.deadline == Duration(seconds=2)
+    assert original.depth == 10  # a copy
+
+
+# ----------------------------------------------------------------------------------------------
+# Time
+# ----------------------------------------------------------------------------------------------
 def test_sample_stamps_are_exact_integer_ns_for_an_hour_at_100_hz():
     period = wire.seconds_to_ns(0.01)
     assert period == 10_000_000

@@ -20,7 +20,6 @@ from typing import Any
 
 from rclpy.event_handler import QoSSubscriptionMatchedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile
 
 import apc_msgs_py as wire
 from apc_core.nodeutil import run_node
@@ -53,15 +52,6 @@ PARAMS: tuple[Param, ...] = (
 #: depth 10 lost five joint states that way in test/test_faults_system.py). The channel metadata
 #: still records the publishers' offered QoS.
 RECORDER_QUEUE_DEPTH = 1000
-
-
-def _deep(qos: QoSProfile) -> QoSProfile:
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=max(qos.depth, RECORDER_QUEUE_DEPTH),
-        reliability=qos.reliability,
-        durability=qos.durability,
-    )
 
 
 class RecorderNode(Node):
@@ -108,7 +98,7 @@ class RecorderNode(Node):
                     spec.msg_type,
                     spec.name,
                     lambda data, topic=topic: self._on_message(topic, data),
-                    _deep(spec.qos),
+                    wire.with_depth(spec.qos, RECORDER_QUEUE_DEPTH),
                     raw=True,
                     event_callbacks=SubscriptionEventCallbacks(
                         matched=lambda info, topic=topic: self._on_matched(topic, info)
