@@ -20,12 +20,14 @@ reports the median and the worst run's max error over the joints, the worst fina
 wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--json FILE]
+        [--ideal-velocity] [--armature] [--alpha-model A] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
 ``--ideal-velocity``: the ideal arm's driver publishes the arm's exact velocity as well (what
-``robot_sim`` does by default), instead of positions only.
+``robot_sim`` does by default), instead of positions only. ``--armature``: the controllers'
+model of a physical arm has its rotor inertia (the controller nodes' ``armature`` parameter).
+``--alpha-model A``: the recommended preset with ``alpha_model`` A.
 """
 
 from __future__ import annotations
@@ -68,12 +70,13 @@ def one_run(
     settings: dict | None = None,
     ideal_velocity: bool = False,
     setup: Callable[[RobotLoop], object] | None = None,
+    armature: bool = False,
 ) -> dict:
     """Run ``index`` of a cell: max and final error per joint (deg), hand-overs.
 
     ``effects``: one of :data:`EFFECTS`, or the arm's effects themselves (in MuJoCo, as
     ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before
-    activation).
+    activation); ``armature``: the controllers know a physical arm's rotor inertia.
     """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
@@ -95,6 +98,11 @@ def one_run(
         settings=settings,
         velocity=True if ideal_velocity else None,
         setup=setup,
+        armature=(
+            arm_effects.per_joint("armature_kgm2", len(scenario.q_goal_deg))
+            if armature and arm_effects is not None
+            else None
+        ),
     )
     errors = run.tracking_error_deg()
     return {
@@ -125,10 +133,14 @@ def _finite(value: float) -> float:
 
 
 def measure(
-    arms: tuple[str, ...] = ARMS, settings: dict | None = None, ideal_velocity: bool = False
+    arms: tuple[str, ...] = ARMS,
+    settings: dict | None = None,
+    ideal_velocity: bool = False,
+    armature: bool = False,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
-    preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity."""
+    preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
+    ``armature``: the controllers know a physical arm's rotor inertia."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -137,7 +149,15 @@ def measure(
                     for law, supervisor in LAWS.items():
                         runs = [
                             one_run(
-                                arm, effects, rate, late, i, supervisor, settings, ideal_velocity
+                                arm,
+                                effects,
+                                rate,
+                                late,
+                                i,
+                                supervisor,
+                                settings,
+                                ideal_velocity,
+                                armature=armature,
                             )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
@@ -220,9 +240,21 @@ def main() -> None:
         action="store_true",
         help="the ideal arm's states carry its exact velocity (a driver that publishes one)",
     )
+    parser.add_argument(
+        "--armature",
+        action="store_true",
+        help="the controllers' model of a physical arm has its rotor inertia",
+    )
+    parser.add_argument("--alpha-model", type=float, help="the preset's alpha_model instead")
     args = parser.parse_args()
-    settings = {**recommended_settings(), "relinearize": False} if args.no_relinearize else None
-    cells = measure(tuple(args.arms), settings, args.ideal_velocity)
+    settings = None
+    if args.no_relinearize or args.alpha_model is not None:
+        settings = dict(recommended_settings())
+        if args.no_relinearize:
+            settings["relinearize"] = False
+        if args.alpha_model is not None:
+            settings["alpha_model"] = args.alpha_model
+    cells = measure(tuple(args.arms), settings, args.ideal_velocity, args.armature)
     print()
     print(markdown(cells), end="")
     if args.json:
@@ -230,6 +262,8 @@ def main() -> None:
             "simulated_time": True,
             "relinearize": not args.no_relinearize,
             "ideal_velocity": args.ideal_velocity,
+            "armature": args.armature,
+            "alpha_model": args.alpha_model,
             "cells": cells,
         }
         args.json.write_text(json.dumps(doc, indent=1) + "\n")

@@ -574,6 +574,7 @@ BAD_CONFIGS = [
     ("lock_joints", FF, ["-p", "lock_joints:=[nope]"], "lock_joints", "nope"),
     ("inertia_error_ff", FF, ["-p", "inertia_error:=[0.1]"], "inertia_error", "needs 3 values"),
     ("inertia_error_fb", FB, ["-p", "inertia_error:=[0.1, 0.1]"], "inertia_error", "needs 3"),
+    ("armature_fb", FB, ["-p", "armature:=[0.1, -0.1, 0.1]"], "armature", ">= 0"),
     ("goal_length", FF, ["-p", "move.goal_deg:=[1.0]"], "move.goal_deg", "needs 3 values"),
     ("q_initial_length", PLANT, ["-p", "q_initial_deg:=[1.0]"], "q_initial_deg", "needs 3"),
     ("payload_frame", PLANT, ["-p", "payload.frame:=nope"], "payload.frame", "nope"),

@@ -189,6 +189,26 @@ def test_the_controllers_robot_names_a_bad_inertia_error(error, words):
     assert str(info.value).startswith("parameter 'inertia_error': ")
 
 
+@pytest.mark.parametrize(
+    ("armature", "words"), [([0.1], "needs 3 values"), ([0.1, -1.0, 0.0], ">= 0")]
+)
+def test_the_controllers_robot_names_a_bad_armature(armature, words):
+    values = {p.name: p.default for p in CONTROLLER_ROBOT_PARAMS}
+    with pytest.raises(ConfigError, match=words) as info:
+        controller_robot_from_params({**values, "armature": armature})
+    assert str(info.value).startswith("parameter 'armature': ")
+
+
+def test_the_controllers_robot_carries_the_armature_and_the_inertia_error():
+    values = {p.name: p.default for p in CONTROLLER_ROBOT_PARAMS}
+    robot = controller_robot_from_params(
+        {**values, "armature": [0.2, 0.3, 0.4], "inertia_error": [0.1, -0.1, 0.1]}
+    )
+    np.testing.assert_array_equal(robot.model.armature, [0.2, 0.3, 0.4])
+    plain = controller_robot_from_params({**values, "inertia_error": [0.1, -0.1, 0.1]})
+    np.testing.assert_array_equal(robot.model.inertias[2].inertia, plain.model.inertias[2].inertia)
+
+
 def test_pid_takes_its_parameter_family(node_of):
     fb = node_of("pid", **{"pid.bandwidth": 8.0, "pid.i_clamp": [1.0, 2.0, 3.0]})
     assert fb.law.requested.bandwidth == 8.0 and fb.law.requested.i_clamp == (1.0, 2.0, 3.0)

@@ -63,3 +63,33 @@ def test_at_100_hz_the_prior_of_the_estimated_velocity_holds_the_panda():
         loop.law.expect_velocity_stencil = lambda stencil: expect(None)
 
     assert _panda_move(100, False, setup=velocity_as_measured).max_tracking_error_deg() > 90.0
+
+
+def test_a_slow_model_holds_the_puma_with_rotor_inertia_once_its_model_has_it():
+    """100 Hz, the PUMA with its rotor inertia alone, ``alpha_model`` 1e-5: the prior's input
+    gain is 3-5 times too large on joints 2 and 3 and a slow model keeps it through the move
+    (lost); the controllers told the rotor inertia (``armature``) track (docs/robot.md, "A
+    slower model")."""
+    from apc_plant_sim.effects import single_effect
+
+    full = ARM_EFFECTS["puma3"]()
+    scenario = arm_scenario("puma3", "c")
+
+    def worst(armature) -> tuple[float, float]:
+        run = run_robot_loop(
+            2.5,
+            goal_deg=scenario.q_goal_deg,
+            driver_ms=10.0,
+            phase_ms=3.7,
+            payload_kg=scenario.payload_kg,
+            effects=single_effect("armature", full),
+            arm=scenario,
+            settings={**recommended_settings(), "alpha_model": 1e-5},
+            armature=armature,
+        )
+        error = run.tracking_error_deg()
+        return float(error.max()), float(error[-1].max())
+
+    assert worst(None)[0] > 10.0
+    told_max, told_final = worst(full.per_joint("armature_kgm2", 3))
+    assert told_max < 0.3 and told_final < 0.05

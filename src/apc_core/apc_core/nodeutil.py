@@ -47,6 +47,7 @@ from apc_core.robot import (
     RobotModelError,
     load_robot,
     read_urdf,
+    with_armature,
     with_inertia_error,
 )
 from apc_msgs_py import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
@@ -89,6 +90,12 @@ CONTROLLER_ROBOT_PARAMS: tuple[Param, ...] = (
         [],
         "relative error of the controller's link inertia tensors, one per joint (the paper's "
         "simulation study: [0.1, -0.1, 0.1]); empty = the URDF as is",
+    ),
+    Param(
+        "armature",
+        [],
+        "the controllers' model: reflected rotor inertia G^2 J_m of each joint's drive "
+        "(kg m^2, one per joint; a URDF has no place for it); empty = none",
     ),
 )
 
@@ -146,15 +153,15 @@ def matched_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile) ->
 
 def controller_robot_from_params(values: dict[str, Any]) -> Robot:
     """The controllers' model of the arm named by :data:`CONTROLLER_ROBOT_PARAMS` values: the
-    robot with ``inertia_error``; errors name the parameter."""
+    robot with ``inertia_error`` and ``armature``; errors name the parameter."""
     robot = robot_from_params(values)
-    error = values["inertia_error"]
-    if not error:
-        return robot
-    try:
-        return with_inertia_error(robot, error)
-    except RobotModelError as exc:
-        raise ConfigError(f"parameter 'inertia_error': {exc}") from None
+    for name, change in (("inertia_error", with_inertia_error), ("armature", with_armature)):
+        if values[name]:
+            try:
+                robot = change(robot, values[name])
+            except RobotModelError as exc:
+                raise ConfigError(f"parameter '{name}': {exc}") from None
+    return robot
 
 
 def fill_derived(values: dict[str, Any], robot: Robot, derived: Mapping[str, str]) -> list[str]:

@@ -347,6 +347,28 @@ def with_inertia_error(robot: Robot, relative_error: Sequence[float]) -> Robot:
     return _derived(robot, model)
 
 
+def with_armature(robot: Robot, armature_kgm2: Sequence[float]) -> Robot:
+    """Return a new robot whose joints carry a reflected rotor inertia (Pinocchio's
+    ``model.armature``: ``G^2 J_m`` of each joint's drive, added to the mass matrix's diagonal,
+    so to RNEA, CRBA, ABA and their derivatives). A URDF has no place for it; a geared arm's
+    can exceed its links' inertia about the joint.
+
+    Parameters
+    ----------
+    armature_kgm2 : (n,) sequence of float
+        One per joint, each finite and >= 0.
+    """
+    value = np.asarray(armature_kgm2, dtype=float)
+    n = robot.n_joints
+    if value.shape != (n,):
+        raise RobotModelError(f"armature needs {n} values (one per joint), got {value.shape}")
+    if not np.all(np.isfinite(value)) or np.any(value < 0.0):
+        raise RobotModelError(f"armature values must be finite and >= 0, got {value.tolist()}")
+    model = pin.Model(robot.model)
+    model.armature = value.copy()
+    return _derived(robot, model)
+
+
 #: ``robot_description_path`` prefix of a URDF from the ``example-robot-data`` wheel.
 EXAMPLE_ROBOT_DATA = "example-robot-data/"
 

@@ -25,6 +25,7 @@ from apc_core.robot import (
     Payload,
     Robot,
     RobotModelError,
+    with_armature,
     with_inertia_error,
     with_payload,
 )
@@ -221,3 +222,24 @@ def test_inertia_error_rejects_bad_values(puma3: Robot, err) -> None:
     """Wrong length, e <= -1, NaN or inf: RobotModelError."""
     with pytest.raises(RobotModelError, match="inertia error"):
         with_inertia_error(puma3, err)
+
+
+def test_armature_adds_to_the_mass_matrix_diagonal_and_to_rnea(puma3: Robot) -> None:
+    armature = np.array([0.5, 1.0, 0.25])
+    geared = with_armature(puma3, armature)
+    q, v, a = np.array([0.1, -0.4, 0.7]), np.array([0.3, -0.2, 0.5]), np.array([1.0, -2.0, 3.0])
+    plain_data, geared_data = puma3.model.createData(), geared.model.createData()
+    m_plain = pin.crba(puma3.model, plain_data, q)
+    m_geared = pin.crba(geared.model, geared_data, q)
+    m_plain = np.triu(m_plain) + np.triu(m_plain, 1).T
+    m_geared = np.triu(m_geared) + np.triu(m_geared, 1).T
+    assert_allclose(m_geared - m_plain, np.diag(armature), atol=1e-12)
+    tau_plain = pin.rnea(puma3.model, plain_data, q, v, a)
+    assert_allclose(pin.rnea(geared.model, geared_data, q, v, a) - tau_plain, armature * a)
+    assert_array_equal(puma3.model.armature, np.zeros(3))  # the robot given is not changed
+
+
+@pytest.mark.parametrize("bad", [[0.1, 0.2], [0.1, -0.2, 0.3], [0.1, float("nan"), 0.3]])
+def test_armature_needs_one_finite_non_negative_value_per_joint(puma3: Robot, bad) -> None:
+    with pytest.raises(RobotModelError, match="armature"):
+        with_armature(puma3, bad)

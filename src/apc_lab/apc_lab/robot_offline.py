@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.robot import Payload, load_robot, with_inertia_error
+from apc_core.robot import Payload, load_robot, with_armature, with_inertia_error
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -121,6 +121,7 @@ def run_robot_loop(
     effects: ArmEffects | None = None,
     arm: Scenario | None = None,
     velocity: bool | None = None,
+    armature: Sequence[float] | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -164,6 +165,9 @@ def run_robot_loop(
     velocity : bool, optional
         Whether the states carry a velocity (the ideal arm's exact one, a physical arm's
         drive's); default: a physical arm's do, the ideal arm's do not.
+    armature : sequence of float, optional
+        The controllers' model's rotor inertia per joint (kg m^2), as the controller nodes'
+        ``armature`` parameter; default none.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -171,6 +175,8 @@ def run_robot_loop(
     robot = load_robot(arm.urdf, gravity=arm.gravity, lock_joints=arm.lock_joints)
     n = robot.n_joints
     controller = with_inertia_error(robot, arm.inertia_error)
+    if armature is not None:
+        controller = with_armature(controller, armature)
     q0 = np.deg2rad(arm.q_start_deg)
     # The driver's command order: the URDF's reversed, so that the loop's mapping is exercised.
     command_joints = tuple(reversed(robot.joint_names))
