@@ -67,8 +67,7 @@ def _run_across_link(
     Returns the plant's exit code, the recording and the plant's stderr.
     """
     scenario = paper_scenario("c", hold_s=0.5)
-    spec = RunSpec(scenario, "adaptive", paper_settings(), mode)
-    params = spec.node_parameters()
+    params = RunSpec(scenario, "adaptive", paper_settings(), mode).node_parameters()
     params["plant_node"].update(
         resend_s=0.1, lockstep_timeout_s=10.0, watchdog_s=NETWORK_WATCHDOG_S
     )

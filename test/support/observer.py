@@ -20,6 +20,7 @@ from sensor_msgs.msg import JointState
 
 import apc_msgs_py as wire
 
+from .arm import T_NS
 from .graph import Graph
 from .qos import deep
 
@@ -138,8 +139,9 @@ class Observer:
         )
 
     # -- queries --------------------------------------------------------------------------------
-    def k(self) -> int:
-        return self.states[-1][1] // 10_000_000 if self.states else -1
+    def k(self, period_ns: int = T_NS) -> int:
+        """The newest joint state's sample index (-1 before the first)."""
+        return self.states[-1][1] // period_ns if self.states else -1
 
     def diag_after(self, t: float, level: int | None = None) -> list:
         return [d for d in self.diag if d[0] > t and (level is None or d[1] == level)]

@@ -57,8 +57,8 @@ class Children:
     Each runs ``python -m`` its node's module (:data:`NODE_MODULES`), with ``params_file``
     (but the recorder), or a helper module (:meth:`start_module`), behind ``prefix`` (``ip
     netns exec ...``) and in ``env``; its stdout and stderr go to ``<key>.<n>.out`` / ``.err``
-    in ``tmp_path``. A node started again under its
-    key replaces the old process, which is kept for :meth:`close`; that stops them all.
+    in ``tmp_path``. A node started again under its key replaces the old process, which is kept
+    for :meth:`close`; that stops them all.
     """
 
     def __init__(self, tmp_path: Path, params_file: Path | None = None) -> None:

@@ -46,9 +46,8 @@ class ClockStepper:
         self._pub = obs.node.create_publisher(ClockMsg, wire.CLOCK, wire.CLOCK_QOS)
 
     def k(self) -> int:
-        """The newest joint state's sample index (-1 before the first)."""
-        states = self.obs.states
-        return states[-1][1] // self.period_ns if states else -1
+        """The newest joint state's sample index at this period (-1 before the first)."""
+        return self.obs.k(self.period_ns)
 
     def answered(self, k: int, who: str) -> bool:
         """Joint state ``k``'s answer from ``who`` (:data:`FF` or :data:`FB`) has been seen."""

@@ -230,8 +230,7 @@ class RobotNode(LifecycleNode):
         self._sample_msg = JointState()
         self._setpoint_msg = JointTrajectory()
         self._command_msg = Float64MultiArray()
-        qos = wire.CONTROL_QOS
-        out_qos = wire.writer_qos(qos)
+        out_qos = wire.writer_qos(wire.CONTROL_QOS)
         self.command_pub = self.create_publisher(
             Float64MultiArray, topic, QoSPresetProfiles.SYSTEM_DEFAULT.value
         )

@@ -167,7 +167,7 @@ class TorqueIntake:
     def missing(self, k: int) -> list[Source]:
         """Lockstep: the torques of sample ``k`` not in yet."""
         stamp = k * self.period_ns
-        return [s for s in Source if stamp not in self.pending[s]]
+        return [s for s in Source if not self.holds(s, stamp)]
 
     def complete(self, k: int) -> bool:
         """Lockstep: both torques of sample ``k`` are in."""
