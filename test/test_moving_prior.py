@@ -93,3 +93,24 @@ def test_a_slow_model_holds_the_puma_with_rotor_inertia_once_its_model_has_it():
     assert worst(None)[0] > 10.0
     told_max, told_final = worst(full.per_joint("armature_kgm2", 3))
     assert told_max < 0.3 and told_final < 0.05
+
+
+def test_the_drivers_differenced_velocity_found_holds_the_physical_panda_with_a_slow_model():
+    """250 Hz, the physical Panda (its drive reports the backward difference of its quantised
+    positions and adds a cycle), ``alpha_model`` 1e-5: robot mode finds from the states in
+    motion that the velocity is a difference and restarts the law with its stencil, before
+    the move; taken as the arm's velocity, the law loses the arm (docs/robot.md, "A driver's
+    differenced velocity")."""
+    found = _panda_move(250, True, alpha_model=1e-5)
+    assert found.counts.get("velocity_kind_changes") == 1
+    assert found.max_tracking_error_deg() < 1.0
+
+    def velocity_as_measured(loop):
+        loop._follow_velocity_kind = lambda k: None
+
+    assert (
+        _panda_move(
+            250, True, setup=velocity_as_measured, alpha_model=1e-5
+        ).max_tracking_error_deg()
+        > 10.0
+    )

@@ -12,8 +12,9 @@ from support.plans import HOLD_U_N, ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
 from apc_feedback.baselines import PD, PdGains
+from apc_feedback.linearize import VelocityStencil
 from apc_feedback.robot_loop import NOTHING, CommandMap, RobotLoop
-from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedback.robot_sampling import DIFFERENCE_STATES, RobotSamplingConfig
 from apc_feedforward.nominal import Setpoint
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.scenario import recommended_settings
@@ -344,3 +345,40 @@ def test_the_first_start_waits_for_the_drivers_period():
     assert counts["starts"] == 1 and step.sample.stamp_ns == 101 * T
     assert step.setpoint.q[0] == 0.01
     assert loop.sampler.driver_period_ns == T
+
+
+class _StencilPD(PD):
+    """A PD told what the adaptive law is told of its samples' velocity."""
+
+    def __init__(self):
+        super().__init__(2, PdGains(kp=100.0, kv=0.0))
+        self.told, self.restarts = [], 0
+
+    def expect_velocity_stencil(self, stencil):
+        self.told.append(stencil)
+
+    def expect_input_delay(self, seconds, candidates=()):
+        pass
+
+    def restart(self):
+        self.restarts += 1
+
+
+def test_a_driver_velocity_found_to_be_a_difference_restarts_the_law_with_its_stencil():
+    """At the start the driver's velocity is the arm's as far as is known; once its states in
+    motion show it is the backward difference of the positions the law is told the stencil
+    and restarts (once, counted, logged), the plan untouched."""
+    loop, counts, logs = _loop()
+    loop.law = law = _StencilPD()
+    loop.activate()
+    q, stamp = 0.0, 100 * T
+    loop.on_joint_state(_state(stamp, q, 0.0), stamp)
+    assert counts["starts"] == 1 and law.told == [None]
+    for i in range(1, 3 * DIFFERENCE_STATES):
+        step = 1e-4 * i
+        q, stamp = q + step, stamp + T
+        assert loop.on_joint_state(_state(stamp, q, step / 0.01), stamp).command is not None
+    assert counts["velocity_kind_changes"] == 1 and law.restarts == 1
+    assert counts["starts"] == 1  # no start: the plan and its goals stand
+    assert law.told == [None, VelocityStencil((0.0, 0.01), (100.0, -100.0))]
+    assert any("backward difference of the driver's positions over 10 ms" in t for _, t in logs)

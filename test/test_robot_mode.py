@@ -388,6 +388,7 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         # velocity estimated over 4 ms and a 2 ms delay fit the preset's two lags at T = 10 ms
         assert float(diag.values["law.input_delay_ms"]) == 2.0
         assert diag.values["law.input_lags"] == "2"
+        assert diag.values["velocity_kind"] == "estimated"  # this driver sends positions only
         assert diag.count("path_tolerance_aborts") == 0 and diag.count("watchdog") == 0
         # deactivate mid-move: one gravity hold, then no command
         goals.publish(_goal_msg(Q0_DEG))

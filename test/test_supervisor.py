@@ -394,13 +394,14 @@ def test_the_law_alone_loses_the_physical_puma_in_some_runs_on_a_500hz_driver():
 
 def test_commands_a_cycle_late_on_the_physical_puma_are_held_by_either_fallback():
     """30 % of the commands one driver cycle late on a 500 Hz driver (a loaded machine's jitter,
-    which wall time has and simulated time has not): the law hands over in two runs of three,
-    and the fallback's transition and sag under the unknown payload cost up to 10.3 deg with
-    computed torque and 7.4 deg with the PID (measured; 8.4 and 4.1 deg before the planned
+    which wall time has and simulated time has not): the law, not told the arm's rotor inertia,
+    hands over, and the fallback's transition and sag under the unknown payload cost up to
+    11.3 deg with computed torque and 5.8 deg with the PID (measured; 10.3 and 7.4 deg before
+    robot mode modelled the drive's differenced velocity, 8.4 and 4.1 deg before the planned
     input's change was weighed, ``q_input_change``: the physical PUMA's runs are chaotic in
     their inputs, and over the offline grid's 90 supervised runs at 250 Hz-1 kHz the worst
     went from 9.5 to 10.1 deg, the median staying 8 deg: bench/robot_clock_offline.py)."""
-    bounds = {"computed_torque": 11.0, "pid": 8.0}
+    bounds = {"computed_torque": 12.0, "pid": 8.0}
     for seed, payload in enumerate(PAYLOADS_KG):
         for fallback, bound in bounds.items():
             late = Latency(late_ms=2.0, probability=0.3, seed=seed)
@@ -413,13 +414,15 @@ def test_commands_a_cycle_late_on_the_physical_puma_are_held_by_either_fallback(
 def test_on_a_100hz_driver_the_pid_fallback_holds_the_physical_puma_computed_torque_sags():
     """A command acts 2.5 driver periods after its state (the driver's cycle, the drive's own,
     the differenced velocity): the law alone loses the arm (beyond the 10 deg the wall-time
-    benchmark calls lost: 11.6-933 deg); the PID fallback keeps it within 7 deg, the
-    computed-torque fallback, at the gains a 100 Hz driver allows, sags beyond 10 deg
-    (11.7-16.7 deg)."""
+    benchmark calls lost: 121-366 deg); the PID fallback keeps it within 10 deg (6.7-10.0
+    deg; 4.7-7.4 before robot mode modelled the drive's differenced velocity, which the law not
+    told the arm's rotor inertia does not gain from: docs/robot.md, "A driver's differenced
+    velocity"), the computed-torque fallback, at the gains a 100 Hz driver allows, sags beyond
+    10 deg (11.5-16.7 deg)."""
     for payload in PAYLOADS_KG:
         assert _physical(100, payload)[0] > 10.0
         pid, handovers = _physical(100, payload, supervisor=SupervisorConfig(fallback="pid"))
-        assert pid < 9.0 and handovers >= 1
+        assert pid < 10.5 and handovers >= 1
         computed_torque, _ = _physical(100, payload, supervisor=SupervisorConfig())
         assert 10.0 < computed_torque < 20.0
 

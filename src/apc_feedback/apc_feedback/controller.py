@@ -426,6 +426,23 @@ class AdaptiveFeedback(FeedbackLaw):
             command = np.clip(u_n + du, self._effort_floor, self._effort_limit)
             self._observed.append((k, command - u_n))
 
+    def restart(self) -> None:
+        """Restart identification from Eq. 33 at the next sample (:meth:`reset`), keeping this
+        law's own commands still on their way (with lags, its start plans with them as it does
+        with a fallback's, :meth:`observe_command`): for a change of what it is told of its
+        samples while it commands."""
+        if self._started and self.config.input_lags:
+            k = self._k_prev
+            command = np.clip(
+                self._u_n_prev + self._du_prev, self._effort_floor, self._effort_limit
+            )
+            on_the_way = [(k, command - self._u_n_prev)]
+            on_the_way += [(k - 1 - j, row.copy()) for j, row in enumerate(self._inputs)]
+            self.reset()
+            self._observed.extend(on_the_way[: self._observed.maxlen])
+        else:
+            self.reset()
+
     def expect_velocity_stencil(self, stencil: VelocityStencil | None) -> None:
         """From the next (re)start, the samples' velocity is ``stencil`` of past positions
         (robot mode's estimate for a driver that sends none; None: a measured velocity): the

@@ -203,6 +203,7 @@ class RobotLoop:
         # The adaptive law's model of its input, and the delay it used at its last step.
         self._input_timing = getattr(self.law, "input_timing", None)
         self._modelled_delay: float | None = None
+        self._velocity_kind = ""  # what the samples' velocity was at the last start
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
@@ -233,6 +234,8 @@ class RobotLoop:
                 self.count("start_waits_for_driver_period")
                 return NOTHING
             self._start(take.k)
+        elif sampler.velocity_kind != self._velocity_kind:
+            self._follow_velocity_kind(take.k)
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
             return Step(sample=sample)
@@ -304,6 +307,7 @@ class RobotLoop:
             # both delays and a restart takes the clearly better.
             expect(driver_period, (2.0 * driver_period,))
             self.law.expect_velocity_stencil(self.sampler.velocity_stencil())
+        self._velocity_kind = self.sampler.velocity_kind
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
@@ -312,6 +316,36 @@ class RobotLoop:
             self._drop_plan(k)
         self._restart = self._replan = False
         self.count("starts")
+
+    def _follow_velocity_kind(self, k: int) -> None:
+        """The samples' velocity turned out to be another kind than at the start (that the
+        driver's velocity is the backward difference of its positions takes states in motion to
+        tell, :class:`~apc_feedback.robot_sampling.DifferenceCheck`): counted, logged, and a
+        law that models its samples' velocity is told the new stencil and, if it commands,
+        restarts its identification from Eq. 33 with its commands on their way kept."""
+        sampler = self.sampler
+        self._velocity_kind = source = sampler.velocity_kind
+        stencil = sampler.velocity_stencil()
+        self.count("velocity_kind_changes")
+        what = {
+            "difference": "the backward difference of the driver's positions"
+            + (f" over {stencil.offsets[-1] * 1e3:.3g} ms" if stencil is not None else ""),
+            "driver": "the driver's, taken as the arm's",
+            "estimated": "estimated from the driver's positions",
+        }.get(source, source)
+        expect = getattr(self.law, "expect_velocity_stencil", None)
+        if expect is None:
+            self.log("info", f"sample {k}: the joint states' velocity is {what}")
+            return
+        expect(stencil)
+        supervisor = self.supervisor
+        if supervisor is None or supervisor.in_charge == ADAPTIVE:
+            self.law.restart()
+        self.log(
+            "info",
+            f"sample {k}: the joint states' velocity is {what}; the adaptive law models it "
+            "from its next start, which is now unless the fallback commands",
+        )
 
     def _drop_plan(self, k: int | None) -> None:
         dropped = self.plan.restart()

@@ -47,7 +47,11 @@ wrong a fallback law (computed torque by default) commands until the error settl
 trigger and hand-over is counted (``supervisor.<trigger>``, ``supervisor.handovers``,
 ``supervisor.handbacks``). Its model of its input is there too: ``law.input_delay_ms`` (the
 delay its prior splits a command by: one driver period, or two once the data say the drive adds
-a cycle, ``input_delay_changes`` counting the switches) and ``law.input_lags``.
+a cycle, ``input_delay_changes`` counting the switches) and ``law.input_lags``; and what the
+samples' velocity is, ``velocity_kind``: ``driver`` (taken as the arm's), ``difference`` (the
+driver's backward difference of its positions, found from its states in motion: the law then
+models its lag, restarting its identification once, ``velocity_kind_changes``) or
+``estimated`` (from positions, for a driver that sends none).
 """
 
 from __future__ import annotations
@@ -85,6 +89,7 @@ from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
 from apc_feedback.robot_sampling import (
+    RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
     SampleTiming,
@@ -102,11 +107,14 @@ class RobotDiagnostics(Diagnostics):
 
     timing: SampleTiming | None = None
     law: FeedbackLaw | None = None
+    sampler: RobotSampler | None = None
 
     def status(self) -> DiagnosticStatus:
         if self.timing is not None:
             for key, value in self.timing.figures().items():
                 self.values[key] = f"{value:.1f}"
+        if self.sampler is not None:
+            self.values["velocity_kind"] = self.sampler.velocity_kind
         # The adaptive law's model of its input: the delay and the lags it carries.
         if isinstance(self.law, AdaptiveFeedback):
             self.values["law.input_delay_ms"] = f"{self.law.input_timing.delay * 1e3:.2f}"
@@ -225,7 +233,7 @@ class RobotNode(LifecycleNode):
             log=level_logger(self),
             **supervision,
         )
-        diag.timing, diag.law = self.loop.timing, self.loop.law
+        diag.timing, diag.law, diag.sampler = self.loop.timing, self.loop.law, self.loop.sampler
         self._period_ns = wire.seconds_to_ns(values["period"])
         self._sample_msg = JointState()
         self._setpoint_msg = JointTrajectory()

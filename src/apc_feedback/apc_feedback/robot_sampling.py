@@ -200,6 +200,77 @@ class VelocityEstimator:
         return velocity
 
 
+#: Informative states in a row whose velocity is their positions' backward difference before
+#: the driver's velocity is taken as one (:class:`DifferenceCheck`).
+DIFFERENCE_STATES = 10
+#: How closely the periods a differenced velocity implies agree (relative): a double's rounding
+#: of ``(q - q_prev) / P`` moves them by a few parts in 1e16; an arm's own velocity misses by
+#: its acceleration over half a period, or by a whole encoder count.
+DIFFERENCE_TOLERANCE = 1e-6
+
+
+class DifferenceCheck:
+    """Whether the driver's velocity is the backward difference of its positions.
+
+    Many drives report ``(q(t) - q(t - P)) / P`` of their encoder (robot_sim's
+    ``velocity_source: difference``): a velocity half a period behind the arm's, which the
+    adaptive law's prior models once it is told the stencil (the same lag robot mode's own
+    estimate has, over one period instead of two). The driver does not say; its states do. A
+    state is informative when some joint moved or has a velocity; then every joint with a
+    position change must have a velocity of the same sign, every joint without one none, and
+    each moving joint's ``Δq / v`` is the period it was differenced over: the same on every joint,
+    within half to twice the stamps' interval. :data:`DIFFERENCE_STATES` informative states in a
+    row that agree make it a difference over their median period; one that does not, or a gap in
+    the states (:meth:`reset`), makes it a velocity of the arm's again. States that say nothing
+    (the arm at rest: every position and velocity unchanged at zero) change nothing. A drive that
+    differences in single precision or filters its difference is taken as measuring the arm's
+    velocity (the law is then not told a stencil: robot mode's behaviour without the check).
+    """
+
+    def __init__(self) -> None:
+        self._periods: list[float] = []
+        self.period_s: float | None = None  # the period the velocity differences over, or None
+
+    def reset(self) -> None:
+        self._periods.clear()
+        self.period_s = None
+
+    def add(self, change: np.ndarray, velocity: np.ndarray, interval_ns: int) -> None:
+        """A state's position change since the previous state (``interval_ns`` before it) and
+        its velocity."""
+        moved, reported = change != 0.0, velocity != 0.0
+        if not (moved.any() or reported.any()):
+            return
+        period = self._period(change, velocity, moved, reported, interval_ns * 1e-9)
+        if period is None:
+            self.reset()
+            return
+        self._periods.append(period)
+        if len(self._periods) > DIFFERENCE_STATES:
+            self._periods.pop(0)
+        if len(self._periods) == DIFFERENCE_STATES:
+            self.period_s = float(np.median(self._periods))
+
+    @staticmethod
+    def _period(
+        change: np.ndarray,
+        velocity: np.ndarray,
+        moved: np.ndarray,
+        reported: np.ndarray,
+        interval_s: float,
+    ) -> float | None:
+        """The period every joint's velocity differences its change over, or None."""
+        if not np.array_equal(moved, reported):
+            return None
+        periods = change[moved] / velocity[moved]
+        period = float(periods[0])
+        if not (0.5 * interval_s <= period <= 2.0 * interval_s):
+            return None
+        if np.any(np.abs(periods - period) > DIFFERENCE_TOLERANCE * period):
+            return None
+        return period
+
+
 def _parabola(
     q0: np.ndarray, q1: np.ndarray, q2: np.ndarray, a: float, b: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -275,6 +346,7 @@ class RobotSampler:
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
         self.velocity_estimated = False  # the newest state came without a velocity
+        self.difference = DifferenceCheck()  # whether the driver's velocity differences positions
         self._intervals: deque[int] = deque(maxlen=PERIOD_INTERVALS)
         self.driver_period_ns = 0  # median stamp interval; 0 before two states
         self.sampling = False
@@ -319,13 +391,19 @@ class RobotSampler:
                 # After a gap in the states a parabola through positions from before it is no
                 # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
                 self.velocity.reset()
+                self.difference.reset()
             else:
+                if state.velocity is not None:
+                    self.difference.add(
+                        state.position - newest.position, state.velocity, stamp - newest.stamp_ns
+                    )
                 self._intervals.append(stamp - newest.stamp_ns)
                 ordered = sorted(self._intervals)  # 15 ints: a tenth of numpy.median's cost
                 n = len(ordered)
                 self.driver_period_ns = int((ordered[(n - 1) // 2] + ordered[n // 2]) / 2)
         self.velocity_estimated = state.velocity is None
         if self.velocity_estimated:
+            self.difference.reset()
             velocity = self.velocity.update(stamp, state.position)
         else:  # the driver's velocity; the estimate's acceleration only if _take carries it
             self.velocity.add(stamp, state.position)
@@ -336,11 +414,31 @@ class RobotSampler:
         return self._take(now_ns)
 
     def velocity_stencil(self) -> VelocityStencil | None:
-        """The samples' velocity as a stencil of the driver's positions at its period (None:
-        the driver sends its velocity, or its period is not known yet)."""
-        if not self.velocity_estimated or self.driver_period_ns <= 0:
+        """The samples' velocity as a stencil of the driver's positions: this estimate's at the
+        driver's period, or the driver's own backward difference (:class:`DifferenceCheck`);
+        None where it is the arm's velocity as far as is known (a driver's that is not a
+        difference, or the driver's period not known yet)."""
+        if not self.velocity_estimated:
+            period = self.difference.period_s
+            return (
+                None
+                if period is None
+                else VelocityStencil((0.0, period), (1.0 / period, -1.0 / period))
+            )
+        if self.driver_period_ns <= 0:
             return None
         return self.velocity.stencil(self.driver_period_ns)
+
+    @property
+    def velocity_kind(self) -> str:
+        """What the samples' velocity is: ``estimated`` (from positions), ``difference`` (the
+        driver's backward difference of its positions), ``driver`` (the driver's, taken as
+        the arm's), or ``none`` before a state."""
+        if self.newest is None:
+            return "none"
+        if self.velocity_estimated:
+            return "estimated"
+        return "driver" if self.difference.period_s is None else "difference"
 
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""

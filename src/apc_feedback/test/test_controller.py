@@ -10,7 +10,7 @@ import pytest
 
 from apc_core.config_files import config_dir
 from apc_core.params import ConfigError
-from apc_core.robot import PAPER_START_DEG, load_robot, with_inertia_error
+from apc_core.robot import PAPER_START_DEG, load_robot
 from apc_feedback.baselines import PD, ComputedTorque, NoFeedback, PdGains
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
 from apc_feedback.laws import LAW_PARAMS, LawParameters, make_law
@@ -18,11 +18,6 @@ from apc_feedback.linearize import SetpointLinearization, initial_model
 from apc_feedback.optimal import one_step_control, receding_horizon_control
 
 rng = np.random.default_rng(7)
-
-
-@pytest.fixture(scope="module")
-def controller_robot():
-    return with_inertia_error(load_robot(config_dir() / "puma560_3dof.urdf"), [0.1, -0.1, 0.1])
 
 
 def _random_sample(n=3):
@@ -560,27 +555,3 @@ def test_the_model_carries_the_lags_the_samples_timing_needs(controller_robot):
     law.reset()
     law.update(2, q, qd, q_d, qd_d, qdd_d, u_n, None)
     assert law.config.input_lags == 2 and law.rls.G.shape == (6, 9)
-
-
-def test_a_start_plans_with_the_commands_another_law_sent(controller_robot):
-    """Commands a fallback sent while the law was idle are its inputs in flight at its start,
-    within the effort limits, newest first; older ones and a law without lags ignore them."""
-    model = controller_robot.model
-    q, qd, q_d, qd_d, qdd_d = _random_sample()
-    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
-    law = AdaptiveFeedback(model, AdaptiveConfig(period=0.01, input_lags=2))
-    limit = law._effort_limit
-    for k, du in ((6, np.full(3, 5.0)), (7, np.full(3, 1e9)), (8, np.array([1.0, 2.0, 3.0]))):
-        law.observe_command(k, u_n, du)
-    law.update(9, q, qd, q_d, qd_d, qdd_d, u_n, None)
-    inputs = law._inputs
-    np.testing.assert_allclose(inputs[0], [1.0, 2.0, 3.0])
-    np.testing.assert_allclose(inputs[1], np.minimum(u_n + 1e9, limit) - u_n)
-    np.testing.assert_allclose(inputs[2], np.full(3, 5.0))
-    law.reset()
-    law.observe_command(2, u_n, np.ones(3))  # long before the next start
-    law.update(20, q, qd, q_d, qd_d, qdd_d, u_n, None)
-    assert not law._inputs.any()
-    plain = AdaptiveFeedback(model, AdaptiveConfig(period=0.01))
-    plain.observe_command(0, u_n, np.ones(3))
-    plain.update(1, q, qd, q_d, qd_d, qdd_d, u_n, None)  # Eq. 16: nothing in flight

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
+from apc_feedback.linearize import VelocityStencil
 from apc_feedback.robot_sampling import (
+    DIFFERENCE_STATES,
+    DifferenceCheck,
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
@@ -341,3 +346,75 @@ def test_sample_timing_figures_from_a_333_hz_driver():
     assert f["state_to_command_max_us"] == 550.0
     assert f["carry_max_us"] <= period / 2 * 1e-3 and f["carry_median_us"] > 0.0
     assert SampleTiming().figures() == {}
+
+
+def _differenced(positions, period_s):
+    """(change, velocity) pairs of a drive that reports (q - q_prev) / period."""
+    for before, after in itertools.pairwise(positions):
+        change = after - before
+        yield change, change / period_s
+
+
+def test_a_velocity_that_differences_the_positions_is_recognised_with_its_period():
+    counts = 2.0 * np.pi / 2**16
+    rng = np.random.default_rng(0)
+    positions = np.round(np.cumsum(rng.normal(0.0, 20.0, (30, 3)), axis=0)) * counts
+    check = DifferenceCheck()
+    for i, (change, velocity) in enumerate(_differenced(positions, 0.004)):
+        check.add(change, velocity, 4 * MS + (i % 3 - 1) * 200_000)  # stamps jitter
+        assert (check.period_s is None) == (i + 1 < DIFFERENCE_STATES)
+    assert check.period_s == pytest.approx(0.004, rel=1e-12)
+
+
+def test_an_arms_own_velocity_is_not_taken_for_a_difference():
+    """The arm's velocity differs from a backward difference by its acceleration over half a
+    period (a smooth move), by sub-count motion (quantised positions) or by noise."""
+    t = np.arange(30) * 0.01
+    q = np.stack([np.sin(t), 0.5 * t**2, np.cos(2 * t)], axis=1)
+    qd = np.stack([np.cos(t), t, -2 * np.sin(2 * t)], axis=1)
+    check = DifferenceCheck()
+    for i in range(1, len(t)):
+        check.add(q[i] - q[i - 1], qd[i], T)
+    assert check.period_s is None
+    counts = 2.0 * np.pi / 2**16
+    quantised = np.round(q / counts) * counts
+    for i in range(1, len(t)):
+        check.add(quantised[i] - quantised[i - 1], qd[i], T)
+    assert check.period_s is None
+
+
+def test_states_at_rest_say_nothing_and_one_that_disagrees_starts_the_count_again():
+    check = DifferenceCheck()
+    step = np.array([1e-4, -2e-4])
+    for _ in range(DIFFERENCE_STATES):
+        check.add(step, step / 0.01, T)
+        check.add(np.zeros(2), np.zeros(2), T)  # at rest: no evidence either way
+    assert check.period_s == pytest.approx(0.01)
+    check.add(step, step / 0.01 + np.array([0.0, 1e-3]), T)  # not a difference
+    assert check.period_s is None
+    check.add(np.array([1e-4, 0.0]), np.array([1e-2, 1e-3]), T)  # velocity without a change
+    assert check.period_s is None
+    for _ in range(DIFFERENCE_STATES - 1):
+        check.add(step, step / 0.01, T)
+    assert check.period_s is None
+    check.add(step, step / 0.01, T)
+    assert check.period_s == pytest.approx(0.01)
+    check.add(step, step / 0.001, T)  # a difference over a tenth of the states' interval
+    assert check.period_s is None
+
+
+def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_after_a_gap():
+    s = _sampler(max_age=0.02)
+    assert s.velocity_kind == "none"
+    q = np.array([0.0])
+    for i in range(DIFFERENCE_STATES + 1):
+        s.offer(_state(i * T, q.copy(), (q - (q - 1e-3 * i if i else q)) / 0.01), i * T)
+        assert s.velocity_kind == "driver" or i == DIFFERENCE_STATES
+        q = q + 1e-3 * (i + 1)
+    assert s.velocity_kind == "difference"
+    assert s.velocity_stencil() == VelocityStencil((0.0, 0.01), (100.0, -100.0))
+    later = (DIFFERENCE_STATES + 5) * T  # a gap in the states: the evidence is from before it
+    s.offer(_state(later, q, 1.0), later)
+    assert s.velocity_kind == "driver" and s.velocity_stencil() is None
+    s.offer(_state(later + T, q + 0.01), later + T)  # positions only: its own estimate
+    assert s.velocity_kind == "estimated"
