@@ -382,3 +382,48 @@ def test_a_driver_velocity_found_to_be_a_difference_restarts_the_law_with_its_st
     assert counts["starts"] == 1  # no start: the plan and its goals stand
     assert law.told == [None, VelocityStencil((0.0, 0.01), (100.0, -100.0))]
     assert any("backward difference of the driver's positions over 10 ms" in t for _, t in logs)
+
+
+def _echoing(loop, law, cycles_late, states, period=T, q_step=1e-4):
+    """Drive ``loop`` with a driver whose effort is the command it applied over the cycle that
+    ended at the state's stamp: a command computed from a state is applied ``1 + cycles_late``
+    cycles after it (and reported a cycle later). Returns the delays the law was told."""
+    told = []
+    law.expect_input_delay = lambda seconds, candidates=(), exact=False: told.append(
+        (round(seconds * 1e9), exact)
+    )
+    applied, queue = np.zeros(2), {}
+    for i in range(states):
+        stamp = 100 * T + i * period
+        applied = queue.pop(i, applied)
+        step = loop.on_joint_state(
+            JointSample(stamp, np.full(2, q_step * i), np.zeros(2), applied.copy()), stamp
+        )
+        if step.command is not None:
+            queue[i + 2 + cycles_late] = loop.command.to_model(step.command)  # reported then
+    return told
+
+
+@pytest.mark.parametrize(
+    ("driver_ms", "cycles_late", "told_exact"), [(10.0, 1, True), (10.0, 0, False), (4.0, 1, False)]
+)
+def test_the_delay_the_drivers_effort_shows_is_told_where_it_is_a_sample_or_more(
+    driver_ms, cycles_late, told_exact
+):
+    """A drive that adds a cycle to a 100 Hz driver applies a command 20 ms after its state:
+    the driver's effort shows it, and the law restarts once with that delay, its split held
+    (``exact``). On time (10 ms, what the law assumed) or under a sample (8 ms at 250 Hz) the
+    law keeps the driver period and its scored candidates."""
+    loop, counts, logs = _loop(before=None)
+    loop.law = law = _StencilPD()
+    loop.activate()
+    period = round(driver_ms * MS)
+    told = _echoing(loop, law, cycles_late, 40 * T // period, period)
+    assert loop.echo.delay_ns == (1 + cycles_late) * period
+    assert told[0] == (period, False)  # at activation: the driver period, scored beside two
+    if told_exact:
+        assert told[1:] == [((1 + cycles_late) * period, True)]
+        assert counts["measured_delay_changes"] == 1 and law.restarts == 1
+        assert any("effort shows a command applied 20 ms after its state" in t for _, t in logs)
+    else:
+        assert told[1:] == [] and counts["measured_delay_changes"] == 0 and law.restarts == 0

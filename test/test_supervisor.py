@@ -411,20 +411,20 @@ def test_commands_a_cycle_late_on_the_physical_puma_are_held_by_either_fallback(
             assert worst < bound
 
 
-def test_on_a_100hz_driver_the_pid_fallback_holds_the_physical_puma_computed_torque_sags():
-    """A command acts 2.5 driver periods after its state (the driver's cycle, the drive's own,
-    the differenced velocity): the law alone loses the arm (beyond the 10 deg the wall-time
-    benchmark calls lost: 121-366 deg); the PID fallback keeps it within 10 deg (6.7-10.0
-    deg; 4.7-7.4 before robot mode modelled the drive's differenced velocity, which the law not
-    told the arm's rotor inertia does not gain from: docs/robot.md, "A driver's differenced
-    velocity"), the computed-torque fallback, at the gains a 100 Hz driver allows, sags beyond
-    10 deg (11.5-16.7 deg)."""
+def test_on_a_100hz_driver_the_law_holds_the_physical_puma_once_the_drives_delay_is_measured():
+    """A command acts two driver periods after its state (the driver's cycle and the drive's
+    own) and the velocity is the drive's difference: robot mode measures the delay from the
+    driver's effort and the law models it with the split held (before, the law alone lost the
+    arm in every run: 121-366 deg). Measured: the law alone 3.7 / 1.2 / 4.0 deg; supervised, the
+    tracking-error trigger still hands over in two runs of three, the PID fallback then keeping
+    it within 4.3 deg and the computed-torque fallback, at the gains a 100 Hz driver allows,
+    sagging beyond 10 deg (11.5-11.8 deg): docs/robot.md, "When the arm applies a command"."""
     for payload in PAYLOADS_KG:
-        assert _physical(100, payload)[0] > 10.0
-        pid, handovers = _physical(100, payload, supervisor=SupervisorConfig(fallback="pid"))
-        assert pid < 10.5 and handovers >= 1
-        computed_torque, _ = _physical(100, payload, supervisor=SupervisorConfig())
-        assert 10.0 < computed_torque < 20.0
+        assert _physical(100, payload)[0] < 5.0
+        pid, _ = _physical(100, payload, supervisor=SupervisorConfig(fallback="pid"))
+        assert pid < 5.0
+        computed_torque, handovers = _physical(100, payload, supervisor=SupervisorConfig())
+        assert computed_torque < 5.0 if not handovers else 10.0 < computed_torque < 20.0
 
 
 # -- robot_node's parameters -------------------------------------------------------------------

@@ -24,6 +24,11 @@ class FeedbackError(SettingError):
 MAX_INPUT_LAGS = 3
 
 
+#: ``split_prior`` for a delay known exactly (the physical preset's, and robot mode's where the
+#: driver's effort shows when a command is applied): the lags' split held, the total learnt.
+HELD_SPLIT_PRIOR = 1e-6
+
+
 @dataclass(frozen=True)
 class AdaptiveConfig:
     """Settings of the adaptive perturbation controller (paper values by default).

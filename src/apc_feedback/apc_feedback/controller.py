@@ -24,15 +24,16 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
+from apc_feedback.adaptive_config import (
+    HELD_SPLIT_PRIOR,
+    MAX_INPUT_LAGS,
+    AdaptiveConfig,
+    FeedbackError,
+)
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
 from apc_feedback.lagged_control import receding_controller, weigh_input_change
-from apc_feedback.linearize import (
-    SetpointLinearization,
-    VelocityStencil,
-    initial_model,
-)
+from apc_feedback.linearize import SetpointLinearization, VelocityStencil, initial_model
 from apc_feedback.optimal import OneStepControl, validate_weights
 from apc_feedback.rls import Rls, RlsError
 
@@ -274,8 +275,7 @@ class AdaptiveFeedback(FeedbackLaw):
         trace_p = float("nan")
         starting = not self._started
         if starting:
-            if self.config.relinearize and self.config.input_lags:
-                self.input_timing.choose()
+            self.input_timing.begin(choose=self.config.relinearize and bool(self.config.input_lags))
             lags = self.input_timing.lags(self._configured_lags, self.config.period)
             if lags != self.config.input_lags:  # the driver's timing needs another model size
                 config = dataclasses.replace(self.config, input_lags=lags)
@@ -407,14 +407,17 @@ class AdaptiveFeedback(FeedbackLaw):
         of ``Ĝ₀ … Ĝ_L``), shape (2n, n): what :attr:`prior_input_gain` started it from."""
         return self._input_gain()
 
-    def expect_input_delay(self, seconds: float, candidates: Sequence[float] = ()) -> None:
-        """Split ``Ĝ(0)`` by this delay (s) at the next (re)start instead of
-        ``config.input_delay``: robot mode's measured delay from a sample to the arm applying
-        its command. No effect on a model without lags. ``candidates``: other delays the arm
-        may have (a drive that adds a cycle); with ``relinearize`` each sample scores how well
-        each one's prior predicts the arm, and a restart (a hand-back) takes the one that
-        predicts clearly best (:class:`apc_feedback.input_timing.DelayChoice`)."""
-        self.input_timing.expect_delay(seconds, candidates)
+    def expect_input_delay(
+        self, seconds: float, candidates: Sequence[float] = (), exact: bool = False
+    ) -> None:
+        """Split ``Ĝ(0)`` by this delay (s), from a sample to the arm applying its command, at
+        the next (re)start instead of ``config.input_delay`` (no effect without lags).
+        ``candidates``: other delays the arm may have (a drive that adds a cycle); with
+        ``relinearize`` each is scored by how well its prior predicts the arm, and a restart
+        takes the clearly best (:class:`apc_feedback.input_timing.DelayChoice`). ``exact``:
+        measured (robot mode, from the driver's effort): the split is held
+        (:data:`HELD_SPLIT_PRIOR`), only the total input gain learnt."""
+        self.input_timing.expect_delay(seconds, candidates, exact)
 
     def observe_command(self, k: int, u_n: np.ndarray, du: np.ndarray) -> None:
         """Another law (a fallback) sent ``u_n + du`` at sample ``k`` while this one is idle:
@@ -427,21 +430,17 @@ class AdaptiveFeedback(FeedbackLaw):
             self._observed.append((k, command - u_n))
 
     def restart(self) -> None:
-        """Restart identification from Eq. 33 at the next sample (:meth:`reset`), keeping this
-        law's own commands still on their way (with lags, its start plans with them as it does
-        with a fallback's, :meth:`observe_command`): for a change of what it is told of its
-        samples while it commands."""
+        """:meth:`reset`, keeping this law's commands still on their way (with lags, its next
+        start plans with them as with a fallback's, :meth:`observe_command`): for a change of
+        what it is told of its samples while it commands."""
+        on_the_way: list[tuple[int, np.ndarray]] = []
         if self._started and self.config.input_lags:
-            k = self._k_prev
-            command = np.clip(
-                self._u_n_prev + self._du_prev, self._effort_floor, self._effort_limit
-            )
-            on_the_way = [(k, command - self._u_n_prev)]
+            k, u_n = self._k_prev, self._u_n_prev
+            command = np.clip(u_n + self._du_prev, self._effort_floor, self._effort_limit)
+            on_the_way = [(k, command - u_n)]
             on_the_way += [(k - 1 - j, row.copy()) for j, row in enumerate(self._inputs)]
-            self.reset()
-            self._observed.extend(on_the_way[: self._observed.maxlen])
-        else:
-            self.reset()
+        self.reset()
+        self._observed.extend(on_the_way[: self._observed.maxlen])
 
     def expect_velocity_stencil(self, stencil: VelocityStencil | None) -> None:
         """From the next (re)start, the samples' velocity is ``stencil`` of past positions
@@ -552,14 +551,18 @@ class AdaptiveFeedback(FeedbackLaw):
         return stuck
 
     def _initial_p(self, G0: np.ndarray) -> np.ndarray | None:
-        """``P(0)`` with the input block of ``split_prior`` (None: the identifier's own)."""
+        """``P(0)`` with the input block of ``split_prior`` (None: the identifier's own); a
+        delay measured exactly, with every lag it needs carried, holds the split
+        (:data:`HELD_SPLIT_PRIOR`)."""
         config, n = self.config, self.n_joints
-        if not config.input_lags or config.split_prior == 1.0 or config.alpha_model <= 0.0:
+        held = self.input_timing.holds_split(config.input_lags, config.period)
+        split_prior = HELD_SPLIT_PRIOR if held else config.split_prior
+        if not config.input_lags or split_prior == 1.0 or config.alpha_model <= 0.0:
             return None
         lags = config.input_lags
         shares = np.linalg.norm(G0[n:].reshape(n, lags + 1, n), axis=(0, 2))
         c = shares / np.linalg.norm(shares)
-        split = np.outer(c, c) + config.split_prior * (np.eye(lags + 1) - np.outer(c, c))
+        split = np.outer(c, c) + split_prior * (np.eye(lags + 1) - np.outer(c, c))
         P0 = np.diag(self.rls.config.initial_p_diagonal(n, lags))
         P0[2 * n : -1, 2 * n : -1] = config.alpha_model * np.kron(split, np.eye(n))
         return P0

@@ -104,26 +104,34 @@ class DelayChoice:
 
 
 class InputTiming:
-    """The delay (s) the prior splits the input by at the next (re)start, the sampled
-    velocity's stencil (None: measured), and the candidate delays' :class:`DelayChoice`."""
+    """The delay (s) the prior splits the input by, the sampled velocity's stencil (None:
+    measured), and the candidate delays' :class:`DelayChoice`, as of the law's current run.
+
+    What the law is told (:meth:`expect_delay`, :meth:`expect_stencil`) takes effect at its next
+    (re)start (:meth:`begin`): within a run the prior the estimate moves with keeps the timing it
+    started with.
+    """
 
     def __init__(self, delay: float) -> None:
         self.delay = float(delay)
         self.stencil: VelocityStencil | None = None
         self.choice = DelayChoice(())
+        self.exact = False  # the delay is measured (its split held), not assumed
+        self._told_delay: tuple[float, tuple[float, ...], bool] | None = None
+        self._told_stencil: tuple[VelocityStencil | None] | None = None
 
-    def expect_delay(self, seconds: float, candidates: Sequence[float] = ()) -> None:
+    def expect_delay(
+        self, seconds: float, candidates: Sequence[float] = (), exact: bool = False
+    ) -> None:
         """``seconds`` from the next (re)start; ``candidates`` scored beside it (the same
-        candidates as before keep their scores)."""
+        candidates as before keep their scores); ``exact``: measured, not assumed."""
         for value in (seconds, *candidates):
             if not (math.isfinite(value) and value >= 0.0):
                 raise FeedbackError(f"input delay must be finite and >= 0 s, got {value}")
-        self.delay = float(seconds)
-        choice = DelayChoice((seconds, *candidates) if candidates else ())
-        if choice.delays != self.choice.delays:
-            self.choice = choice
+        self._told_delay = (float(seconds), tuple(float(c) for c in candidates), exact)
 
     def expect_stencil(self, stencil: VelocityStencil | None) -> None:
+        """``stencil`` from the next (re)start."""
         if stencil is not None and (
             len(stencil.offsets) != len(stencil.weights)
             or not all(math.isfinite(s) and s >= 0.0 for s in stencil.offsets)
@@ -132,7 +140,23 @@ class InputTiming:
             raise FeedbackError(
                 f"velocity stencil must pair finite offsets >= 0 with finite weights, got {stencil}"
             )
-        self.stencil = stencil
+        self._told_stencil = (stencil,)
+
+    def begin(self, choose: bool) -> None:
+        """At a (re)start: take what was told since the last one and, with ``choose``, the
+        candidate delay that predicts the arm clearly best."""
+        if self._told_delay is not None:
+            seconds, candidates, self.exact = self._told_delay
+            self.delay = seconds
+            choice = DelayChoice((seconds, *candidates) if candidates else ())
+            if choice.delays != self.choice.delays:
+                self.choice = choice
+            self._told_delay = None
+        if self._told_stencil is not None:
+            self.stencil = self._told_stencil[0]
+            self._told_stencil = None
+        if choose:
+            self.delay = self.choice.choose(self.delay)
 
     def lags(self, configured: int, period: float) -> int:
         """The lags the model carries: the configured ones, or more (up to
@@ -141,12 +165,17 @@ class InputTiming:
         (:func:`apc_feedback.linearize.stencil_lags`). None without lags (Eq. 16)."""
         if not configured or self.stencil is None:
             return configured
-        needed = stencil_lags(self.stencil, period, self.delay)
-        return min(MAX_INPUT_LAGS, max(configured, needed))
+        return min(MAX_INPUT_LAGS, max(configured, self.needed_lags(period)))
 
-    def choose(self) -> None:
-        """At a (re)start: take the candidate delay that predicts the arm clearly best."""
-        self.delay = self.choice.choose(self.delay)
+    def needed_lags(self, period: float) -> int:
+        """The lags the exact model of a sample needs (more than :data:`MAX_INPUT_LAGS`: the
+        oldest inputs are folded into the last lag carried)."""
+        return stencil_lags(self.stencil, period, self.delay)
+
+    def holds_split(self, lags: int, period: float) -> bool:
+        """Whether ``Ĝ(0)``'s split between the ``lags`` carried is held: the delay is measured
+        and the model carries every lag it needs (a folded split is no measured one)."""
+        return self.exact and self.needed_lags(period) <= lags
 
     def candidates(
         self, prior: np.ndarray, with_delay: Callable[[float], np.ndarray]

@@ -15,6 +15,7 @@ from typing import Any
 
 from apc_core.params import ConfigError, Param
 from apc_core.robot import PAPER_PERIOD_S
+from apc_feedback.adaptive_config import HELD_SPLIT_PRIOR
 from apc_feedback.laws import LAW_PARAMS, LAWS
 
 
@@ -80,7 +81,11 @@ def physical_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     closed-loop data, the lags trade effect between them (``bench/effects_sweep.py``; the
     figures are in docs/paper.md, "What a physical arm adds").
     """
-    return {**recommended_settings(alpha), "input_delay": 1.5 * PAPER_PERIOD_S, "split_prior": 1e-6}
+    return {
+        **recommended_settings(alpha),
+        "input_delay": 1.5 * PAPER_PERIOD_S,
+        "split_prior": HELD_SPLIT_PRIOR,
+    }
 
 
 #: Each preset by name: ``preset(alpha)`` gives the adaptive settings it changes.

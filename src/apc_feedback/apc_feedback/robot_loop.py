@@ -56,7 +56,9 @@ samples are the driver's states and the command leaves in the state's callback, 
 computed from a state is applied one driver period (plus the command's trip) after it, the
 same delay at every sample and in every run. Eq. 16 has no such delay; a law that models it
 (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start and learns the
-rest (docs/robot.md, "A robot's clock", for what each driver rate measures).
+rest, or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`)
+where that is a sample or more, and the samples' velocity as the states show it (docs/robot.md,
+"A robot's clock", for what each driver rate measures).
 """
 
 from __future__ import annotations
@@ -67,8 +69,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.arrays import all_true, any_true
+from apc_feedback.command_echo import CommandEcho
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
+from apc_feedback.linearize import stencil_lags
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
@@ -204,6 +209,10 @@ class RobotLoop:
         self._input_timing = getattr(self.law, "input_timing", None)
         self._modelled_delay: float | None = None
         self._velocity_kind = ""  # what the samples' velocity was at the last start
+        # When the arm applies a command, from the driver's effort; and the delay the law was
+        # told at the last start (None: not measured then).
+        self.echo = CommandEcho()
+        self._told_delay_ns: int | None = None
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
@@ -212,6 +221,7 @@ class RobotLoop:
         :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be sampled."""
         sampler = self.sampler
         sample = sampler.offer(state, now_ns)
+        self.echo.observe(state.stamp_ns, state.effort, sampler.driver_period_ns)
         take = sampler.last
         if not self.active or take is None or take.state_ns != state.stamp_ns:
             return NOTHING  # not sampling, or no sample time near this state
@@ -234,14 +244,16 @@ class RobotLoop:
                 self.count("start_waits_for_driver_period")
                 return NOTHING
             self._start(take.k)
-        elif sampler.velocity_kind != self._velocity_kind:
-            self._follow_velocity_kind(take.k)
+        elif sampler.velocity_kind != self._velocity_kind or self._delay_moved():
+            self._follow_driver(take.k)
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
             return Step(sample=sample)
         step = self._law_step(sample, setpoint)
         if step.command is not None:
             self.command_state_ns = take.state_ns
+            assert self._sent is not None
+            self.echo.sent(take.state_ns, self._sent[1])
         return step
 
     def add_goal(self, goal: TrajectoryGoal) -> None:
@@ -276,6 +288,7 @@ class RobotLoop:
             return NOTHING
         self.faulted, self.command_state_ns = True, None
         self.sampler.start()  # the driver may come back on another cycle
+        self.echo.reset()
         self.count("watchdog")
         self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
         return Step(command=self._hold_command())
@@ -293,21 +306,18 @@ class RobotLoop:
         position is held from ``k`` on.
 
         A law that models its input's delay (``AdaptiveFeedback`` with ``input_lags``) is told
-        the delay it splits ``Ĝ(0)`` by at its next (re)start: one driver period, measured from
-        the stamps. The command leaves in its state's callback and the driver applies it at its
-        next write (ros2_control's read, update, write cycle); what a drive or the transport
-        add beyond that the identified lags learn. With a driver that sends no velocity it is
-        told the estimate's stencil too: the sampled velocity lags the arm's by what the inputs
-        did over the estimate's span (two driver periods), a lag its prior then models.
+        the delay it splits ``Ĝ(0)`` by at its next (re)start: the delay the driver's effort
+        shows (:class:`~apc_feedback.command_echo.CommandEcho`), else one driver period,
+        measured from the stamps, with two scored beside it. The command leaves in its state's
+        callback and the driver applies it at its next write (ros2_control's read, update,
+        write cycle), a drive that adds a cycle one later; what else the transport adds the
+        identified lags learn. It is told the samples' velocity's stencil too: robot mode's
+        estimate for a driver that sends none (the sampled velocity lags the arm's by what the
+        inputs did over the estimate's span, two driver periods), or the driver's backward
+        difference; a measured velocity has none.
         """
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
-        expect = getattr(self.law, "expect_input_delay", None)
-        if expect is not None:
-            # The arm may apply a command a cycle later (a drive that adds one): the law scores
-            # both delays and a restart takes the clearly better.
-            expect(driver_period, (2.0 * driver_period,))
-            self.law.expect_velocity_stencil(self.sampler.velocity_stencil())
-        self._velocity_kind = self.sampler.velocity_kind
+        self._tell_law()
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
                 self.fallback.reconfigure(fallback_gains(self.supervisor.config, driver_period))
@@ -317,34 +327,82 @@ class RobotLoop:
         self._restart = self._replan = False
         self.count("starts")
 
-    def _follow_velocity_kind(self, k: int) -> None:
-        """The samples' velocity turned out to be another kind than at the start (that the
-        driver's velocity is the backward difference of its positions takes states in motion to
-        tell, :class:`~apc_feedback.robot_sampling.DifferenceCheck`): counted, logged, and a
-        law that models its samples' velocity is told the new stencil and, if it commands,
-        restarts its identification from Eq. 33 with its commands on their way kept."""
+    def _tell_law(self) -> None:
+        """Tell a law that models its samples' timing what robot mode knows of the driver now:
+        the delay to the arm applying a command and the samples' velocity (see :meth:`_start`)."""
         sampler = self.sampler
-        self._velocity_kind = source = sampler.velocity_kind
-        stencil = sampler.velocity_stencil()
-        self.count("velocity_kind_changes")
-        what = {
-            "difference": "the backward difference of the driver's positions"
-            + (f" over {stencil.offsets[-1] * 1e3:.3g} ms" if stencil is not None else ""),
-            "driver": "the driver's, taken as the arm's",
-            "estimated": "estimated from the driver's positions",
-        }.get(source, source)
-        expect = getattr(self.law, "expect_velocity_stencil", None)
+        self._velocity_kind = sampler.velocity_kind
+        self._told_delay_ns = self._measured_delay_ns()
+        expect = getattr(self.law, "expect_input_delay", None)
         if expect is None:
-            self.log("info", f"sample {k}: the joint states' velocity is {what}")
             return
-        expect(stencil)
+        measured = self._measured_delay_ns()
+        if measured is not None:
+            expect(measured * 1e-9, (), True)
+        else:
+            # The arm may apply a command a cycle later (a drive that adds one): the law scores
+            # both delays and a restart takes the clearly better.
+            driver_period = sampler.driver_period_ns * 1e-9
+            expect(driver_period, (2.0 * driver_period,))
+        self.law.expect_velocity_stencil(sampler.velocity_stencil())
+
+    def _measured_delay_ns(self) -> int | None:
+        """The delay the driver's effort shows, where the law is told it: a whole sample or more
+        (the sample's own command cannot act before the next sample, which a split learnt from
+        closed-loop data fills with a channel the plan leans on), within the lags the law can
+        carry with the samples' velocity; else None (the law assumes a driver period and scores
+        two, as without a measurement). docs/robot.md, "When the arm applies a command"."""
+        measured = self.echo.delay_ns
+        if measured is None or measured < self.period_ns:
+            return None
+        stencil = self.sampler.velocity_stencil()
+        needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)
+        return measured if needed <= MAX_INPUT_LAGS else None
+
+    def _delay_moved(self) -> bool:
+        """Whether the measured delay differs from the one the law was told at its start by
+        half a driver period or more (a first measurement that differs from the driver period
+        the law assumed, or a driver whose timing changed)."""
+        measured = self._measured_delay_ns()
+        if measured is None:
+            return False
+        told = self._told_delay_ns
+        if told is None:
+            told = self.sampler.driver_period_ns
+        return 2 * abs(measured - told) >= self.sampler.driver_period_ns
+
+    def _follow_driver(self, k: int) -> None:
+        """Robot mode learnt something of the driver since the start that the law models: the
+        samples' velocity is another kind (that the driver's velocity is the backward
+        difference of its positions takes states in motion to tell,
+        :class:`~apc_feedback.robot_sampling.DifferenceCheck`), or the driver's effort shows
+        another delay to the arm applying a command. Counted and logged; a law that models its
+        samples is told and, if it commands, restarts its identification from Eq. 33 with its
+        commands on their way kept."""
+        sampler = self.sampler
+        what = []
+        if sampler.velocity_kind != self._velocity_kind:
+            self.count("velocity_kind_changes")
+            what.append(f"the joint states' velocity is {sampler.velocity_description()}")
+        if self._delay_moved():
+            assert self.echo.delay_ns is not None
+            self.count("measured_delay_changes")
+            what.append(
+                f"the driver's effort shows a command applied {self.echo.delay_ns * 1e-6:.3g} ms "
+                "after its state"
+            )
+        self._tell_law()
+        text = f"sample {k}: " + "; ".join(what)
+        if getattr(self.law, "expect_input_delay", None) is None:
+            self.log("info", text)
+            return
         supervisor = self.supervisor
         if supervisor is None or supervisor.in_charge == ADAPTIVE:
             self.law.restart()
         self.log(
             "info",
-            f"sample {k}: the joint states' velocity is {what}; the adaptive law models it "
-            "from its next start, which is now unless the fallback commands",
+            text + "; the adaptive law models it from its next start, which is now unless "
+            "the fallback commands",
         )
 
     def _drop_plan(self, k: int | None) -> None:
@@ -505,7 +563,7 @@ class RobotLoop:
             self.log(
                 "info",
                 f"sample {k}: the adaptive law now models a command acting "
-                f"{timing.delay * 1e3:.1f} ms after its state (it predicted the arm better)",
+                f"{timing.delay * 1e3:.1f} ms after its state",
             )
 
     def _hand_over(self, k: int, why: str) -> None:

@@ -51,7 +51,11 @@ a cycle, ``input_delay_changes`` counting the switches) and ``law.input_lags``; 
 samples' velocity is, ``velocity_kind``: ``driver`` (taken as the arm's), ``difference`` (the
 driver's backward difference of its positions, found from its states in motion: the law then
 models its lag, restarting its identification once, ``velocity_kind_changes``) or
-``estimated`` (from positions, for a driver that sends none).
+``estimated`` (from positions, for a driver that sends none); and ``command_applied_ms``, the
+delay from a state to the arm applying the command computed from it, as the driver's effort
+shows it (:class:`apc_feedback.command_echo.CommandEcho`; ``unknown`` for a driver whose effort
+is a measured torque or that sends none), which the law models from a sample on
+(``measured_delay_changes``).
 """
 
 from __future__ import annotations
@@ -84,6 +88,7 @@ from apc_core.nodeutil import (
     split_ros_args,
 )
 from apc_core.params import ConfigError, Param, declare, params_from, subset
+from apc_feedback.command_echo import CommandEcho
 from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
@@ -108,6 +113,7 @@ class RobotDiagnostics(Diagnostics):
     timing: SampleTiming | None = None
     law: FeedbackLaw | None = None
     sampler: RobotSampler | None = None
+    echo: CommandEcho | None = None
 
     def status(self) -> DiagnosticStatus:
         if self.timing is not None:
@@ -115,6 +121,11 @@ class RobotDiagnostics(Diagnostics):
                 self.values[key] = f"{value:.1f}"
         if self.sampler is not None:
             self.values["velocity_kind"] = self.sampler.velocity_kind
+        if self.echo is not None:
+            delay = self.echo.delay_ns
+            self.values["command_applied_ms"] = (
+                "unknown" if delay is None else f"{delay * 1e-6:.2f}"
+            )
         # The adaptive law's model of its input: the delay and the lags it carries.
         if isinstance(self.law, AdaptiveFeedback):
             self.values["law.input_delay_ms"] = f"{self.law.input_timing.delay * 1e3:.2f}"
@@ -233,7 +244,8 @@ class RobotNode(LifecycleNode):
             log=level_logger(self),
             **supervision,
         )
-        diag.timing, diag.law, diag.sampler = self.loop.timing, self.loop.law, self.loop.sampler
+        diag.timing, diag.law = self.loop.timing, self.loop.law
+        diag.sampler, diag.echo = self.loop.sampler, self.loop.echo
         self._period_ns = wire.seconds_to_ns(values["period"])
         self._sample_msg = JointState()
         self._setpoint_msg = JointTrajectory()

@@ -440,6 +440,17 @@ class RobotSampler:
             return "estimated"
         return "driver" if self.difference.period_s is None else "difference"
 
+    def velocity_description(self) -> str:
+        """What the samples' velocity is, in words (for a log line)."""
+        stencil = self.velocity_stencil()
+        if self.velocity_kind == "difference" and stencil is not None:
+            span = stencil.offsets[-1] * 1e3
+            return f"the backward difference of the driver's positions over {span:.3g} ms"
+        return {
+            "driver": "the driver's, taken as the arm's",
+            "estimated": "estimated from the driver's positions",
+        }.get(self.velocity_kind, self.velocity_kind)
+
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""
         return self.newest is not None and now_ns - self.newest.stamp_ns <= self.watchdog_ns

@@ -555,3 +555,29 @@ def test_the_model_carries_the_lags_the_samples_timing_needs(controller_robot):
     law.reset()
     law.update(2, q, qd, q_d, qd_d, qdd_d, u_n, None)
     assert law.config.input_lags == 2 and law.rls.G.shape == (6, 9)
+
+
+def test_a_measured_delay_starts_the_identifier_with_the_split_held(controller_robot):
+    """Told a delay exactly (robot mode's measurement), ``P(0)``'s input block is
+    ``alpha_model (c cᵀ + HELD_SPLIT_PRIOR (I - c cᵀ)) ⊗ I``: only the total input gain moves."""
+    from apc_feedback.adaptive_config import HELD_SPLIT_PRIOR
+    from apc_feedback.presets import recommended_settings
+
+    model = controller_robot.model
+    q, qd, q_d, qd_d, qdd_d = _random_sample()
+    u_n = pin.rnea(model, model.createData(), q_d, qd_d, qdd_d)
+    config = AdaptiveConfig.from_dict({**recommended_settings(), "period": 0.01})
+    blocks = {}
+    for exact in (False, True):
+        law = AdaptiveFeedback(model, config)
+        law.expect_input_delay(0.015, (), exact)
+        law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None)
+        blocks[exact] = law.rls.P[6:-1, 6:-1]
+    assert np.allclose(blocks[False], np.diag(np.diag(blocks[False])))  # every lag learnt alike
+    held = blocks[True]
+    # 15 ms at T = 10 ms: half of the input's effect in each of lags 1 and 2, none in lag 0
+    for j in range(3):
+        unit = np.zeros(9)
+        unit[[3 + j, 6 + j]] = np.sqrt(0.5)
+        assert unit @ held @ unit == pytest.approx(config.alpha_model, rel=0.2)
+        assert held[j, j] == pytest.approx(config.alpha_model * HELD_SPLIT_PRIOR, rel=0.5)

@@ -68,11 +68,16 @@ def test_no_choice_before_enough_steps_or_without_candidates():
 def test_input_timing_keeps_scores_for_the_same_candidates_and_checks_what_it_is_told():
     timing = InputTiming(0.0)
     timing.expect_delay(T, (2 * T,))
+    assert timing.delay == 0.0 and not timing.choice.active  # from the next start
+    timing.begin(choose=True)
     choice = timing.choice
+    assert choice.active and timing.delay == T
     timing.expect_delay(T, (2 * T,))  # a re-activation: the same arm, the same scores
+    timing.begin(choose=True)
     assert timing.choice is choice and timing.delay == T
     timing.expect_delay(0.004, (0.008,))
-    assert timing.choice is not choice
+    timing.begin(choose=False)
+    assert timing.choice is not choice and timing.delay == 0.004
     with pytest.raises(FeedbackError, match="input delay"):
         timing.expect_delay(T, (float("nan"),))
     with pytest.raises(FeedbackError, match="stencil"):
@@ -83,10 +88,27 @@ def test_the_lags_grow_with_the_stencil_up_to_three():
     timing = InputTiming(T)
     assert timing.lags(2, T) == 2  # a measured velocity: the configured lags
     timing.expect_stencil(VelocityStencil((0.02, 0.01, 0.0), (50.0, -200.0, 150.0)))
+    assert timing.lags(2, T) == 2  # told, not yet started with it
+    timing.begin(choose=False)
     assert timing.lags(2, T) == 3  # 100 Hz: a period's delay and two of estimate
     assert timing.lags(0, T) == 0  # Eq. 16 stays Eq. 16
     timing.expect_delay(2 * T)
+    timing.begin(choose=False)
     assert timing.lags(2, T) == 3  # four needed, three carried (the rest folded)
     timing.expect_stencil(VelocityStencil((0.004, 0.002, 0.0), (250.0, -1000.0, 750.0)))
     timing.expect_delay(0.002)
+    timing.begin(choose=False)
     assert timing.lags(2, T) == 2  # 500 Hz: within the configured two
+
+
+def test_a_measured_delay_holds_the_split_only_with_every_lag_it_needs_carried():
+    timing = InputTiming(T)
+    timing.expect_delay(2 * T, (), exact=True)
+    timing.expect_stencil(VelocityStencil((0.0, T), (1 / T, -1 / T)))  # the drive's difference
+    assert not timing.exact  # from the next start
+    timing.begin(choose=True)
+    assert timing.exact and timing.delay == 2 * T
+    assert timing.holds_split(3, T) and not timing.holds_split(2, T)  # three needed
+    timing.expect_delay(T, (2 * T,))
+    timing.begin(choose=False)
+    assert not timing.exact and not timing.holds_split(3, T)

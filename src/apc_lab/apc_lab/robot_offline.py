@@ -122,6 +122,7 @@ def run_robot_loop(
     arm: Scenario | None = None,
     velocity: bool | None = None,
     armature: Sequence[float] | None = None,
+    effort: bool = True,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -168,6 +169,10 @@ def run_robot_loop(
     armature : sequence of float, optional
         The controllers' model's rotor inertia per joint (kg m^2), as the controller nodes'
         ``armature`` parameter; default none.
+    effort : bool
+        Whether the states carry the torque the drive applied over the period that ended at
+        their stamp (``robot_sim``'s ``publish_effort``, on by default as there), from which
+        robot mode measures when a command is applied.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -204,7 +209,7 @@ def run_robot_loop(
             command_timeout=duration_s + 1.0,
             command_joints=command_joints,
             publish_velocity=effects is not None if velocity is None else velocity,
-            publish_effort=False,
+            publish_effort=effort,
             sensing=effects if effects is not None else ArmEffects(),
         ),
     )
@@ -278,7 +283,8 @@ def run_robot_loop(
             log.append((now, reading.position.copy()))
             if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
                 velocity = None if reading.velocity is None else reading.velocity.copy()
-                state = JointSample(now, reading.position.copy(), velocity, None)
+                torque = None if reading.effort is None else reading.effort.copy()
+                state = JointSample(now, reading.position.copy(), velocity, torque)
                 heapq.heappush(
                     events, (now + transport, ARRIVAL, next(order), (len(log) - 1, state))
                 )

@@ -1,0 +1,62 @@
+"""When the arm applies a command, from the driver's effort: synthetic drivers, synthetic time."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from apc_feedback.command_echo import MIN_ECHOES, CommandEcho
+
+MS = 1_000_000
+
+
+def _drive(echo, period_ms, cycles_late, every=1, commands=30, noise=0.0, seed=0):
+    """A driver of ``period_ms`` publishing at every cycle the torque applied over the cycle
+    that ended then; a command computed from the state of cycle i (sent every ``every``
+    cycles, in its callback) is applied from cycle i + 1 + ``cycles_late``."""
+    rng = np.random.default_rng(seed)
+    P = round(period_ms * MS)
+    applied = np.zeros(2)
+    queue: dict[int, np.ndarray] = {}
+    for cycle in range(commands * every):
+        if cycle in queue:
+            applied = queue.pop(cycle)
+        effort = applied + noise * rng.standard_normal(2)
+        echo.observe(cycle * P + P, effort, P)  # the state at the end of the cycle
+        if cycle % every == 0:
+            command = rng.normal(size=2) * 10.0
+            echo.sent(cycle * P + P, command)
+            queue[cycle + 2 + cycles_late] = command
+
+
+def test_the_delay_is_one_driver_period_or_one_more_per_cycle_the_drive_adds():
+    for period_ms, late, every in ((10.0, 0, 1), (10.0, 1, 1), (2.0, 1, 5), (4.0, 0, 5 // 2)):
+        echo = CommandEcho()
+        _drive(echo, period_ms, late, every)
+        assert echo.delay_ns == round((1 + late) * period_ms * MS)
+
+
+def test_a_measured_torque_gives_no_delay_and_a_late_command_adds_none():
+    noisy = CommandEcho()
+    _drive(noisy, 10.0, 0, noise=1e-3)
+    assert noisy.delay_ns is None
+    echo = CommandEcho()
+    P = 10 * MS
+    for i in range(MIN_ECHOES + 2):  # every third command a cycle late
+        late = i % 3 == 2
+        command = np.full(2, float(i + 1))
+        echo.sent(i * 10 * P, command)
+        echo.observe(i * 10 * P + (3 if late else 2) * P, command, P)
+        echo.observe(i * 10 * P + 5 * P, command, P)  # held: no new application
+    assert echo.delay_ns == P
+    echo.reset()
+    assert echo.delay_ns is None
+
+
+def test_no_effort_or_a_torque_no_command_was_leaves_the_delay_unknown():
+    silent, other = CommandEcho(), CommandEcho()
+    for i in range(10):
+        for echo in (silent, other):
+            echo.sent(i * MS, np.full(2, float(i)))
+        silent.observe(i * MS + 2 * MS, None, MS)
+        other.observe(i * MS + 2 * MS, np.full(2, 100.0 + i), MS)
+    assert silent.delay_ns is None and other.delay_ns is None
