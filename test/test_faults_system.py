@@ -355,9 +355,10 @@ FOREGROUND = [
 ]
 
 
-def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[str, int]:
+def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> tuple[dict[str, int], int]:
     """Start the runner, signal it once 40 set points are out; check that it ends within 2 s,
-    leaves no process of its group and finishes a complete recording; the recording's counts.
+    leaves no process of its group and finishes a complete recording; the recording's counts
+    and the newest sample whose feedforward torque the observer had seen at the signal.
 
     The observer does not subscribe to ``joint_states``: the runner's plant starts when three
     nodes listen (recorder, feedforward, feedback), and an extra listener could let it start
@@ -385,6 +386,7 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
         )
         seen = len(obs.ff)
         obs.spin_until(lambda: len(obs.ff) >= seen + 40, 60, "40 samples on", [runner])
+        newest = max(obs.ff) // T_NS  # keyed by stamp kT
         t0 = time.monotonic()
         runner.send_signal(sig)
         with contextlib.suppress(subprocess.TimeoutExpired):
@@ -409,7 +411,7 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
         states = read_messages(out / "sig.mcap", topics=["/joint_states"])
         first = min(wire.stamp_to_ns(m.decode().header.stamp) for m in states)
         assert first == 0, f"the recording's first state: {first} ns"
-        return {topic: t["message_count"] for topic, t in info["topics"].items()}
+        return {topic: t["message_count"] for topic, t in info["topics"].items()}, newest
     finally:
         obs.close()
         if runner.poll() is None:
@@ -427,9 +429,12 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> dict[st
 def test_experiment_runner_stops_on_signal_within_2s(tmp_path, sig, processes):
     """The runner ends within 2 s, leaves no process of its group, and finishes its recording
     with the samples seen on the wire, from sample 0 on (the plant's writer repairs what the
-    recorder dropped before its side of the match: apc_msgs_py.CONTROL_WRITER_DEPTH)."""
-    counts = _stop_runner_by_signal(tmp_path, sig, processes)
+    recorder dropped before its side of the match: apc_msgs_py.CONTROL_WRITER_DEPTH) to the
+    newest one the observer had seen when the signal came (the plant is stopped first and the
+    recorder takes what is still queued for it: it lagged 13 samples behind once)."""
+    counts, newest = _stop_runner_by_signal(tmp_path, sig, processes)
     assert counts["/joint_states"] >= 30, counts
+    assert counts["/feedforward/torque"] >= newest + 1, (counts, newest)
 
 
 # ----------------------------------------------------------------------------------------------

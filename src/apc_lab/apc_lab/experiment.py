@@ -199,6 +199,19 @@ def _drain(
         stop.check()
 
 
+def _take_what_is_queued(executor: Any, recorder: Any, most_s: float = 0.5) -> None:
+    """After an interruption, with the plant stopped: let the recorder take what is still
+    queued for it (until a spin takes nothing, at most ``most_s``). A recorder that lagged
+    behind a fast lockstep run would otherwise lose the samples in flight, published before
+    the signal."""
+    deadline = time.monotonic() + most_s
+    idle = 0
+    while idle < 2 and time.monotonic() < deadline:
+        before = sum(recorder.counts.values())
+        executor.spin_once(timeout_sec=0.01)
+        idle = idle + 1 if sum(recorder.counts.values()) == before else 0
+
+
 def overrides(values: Mapping[str, Any]) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in values.items()]
 
@@ -313,6 +326,9 @@ def run_in_process(
             return RunOutcome(path, ok, message, plant.k, _since(t0))
         except (KeyboardInterrupt, ExternalShutdownException) as exc:
             samples = plant.k if plant is not None else 0
+            if plant is not None and executor is not None and context.ok():
+                executor.remove_node(plant)  # it publishes no more
+                _take_what_is_queued(executor, recorder)
             return RunOutcome(
                 path, False, f"interrupted ({exc})".replace(" ()", ""), samples, _since(t0)
             )
@@ -412,6 +428,11 @@ def run_in_processes(
                 _since(t0),
             )
         except (KeyboardInterrupt, ExternalShutdownException) as exc:
+            plant = procs.get("plant_node")
+            if plant is not None and recorder is not None and executor is not None:
+                stop_processes([plant], timeout_s=0.5)  # it publishes no more
+                if context.ok():
+                    _take_what_is_queued(executor, recorder)
             return RunOutcome(
                 path, False, f"interrupted ({exc})".replace(" ()", ""), samples(), _since(t0)
             )
