@@ -199,17 +199,20 @@ def _drain(
         stop.check()
 
 
-def _take_what_is_queued(executor: Any, recorder: Any, most_s: float = 0.5) -> None:
+def _take_what_is_queued(
+    executor: Any, recorder: Any, quiet_s: float = 0.1, most_s: float = 1.0
+) -> None:
     """After an interruption, with the plant stopped: let the recorder take what is still
-    queued for it (until a spin takes nothing, at most ``most_s``). A recorder that lagged
-    behind a fast lockstep run would otherwise lose the samples in flight, published before
-    the signal."""
-    deadline = time.monotonic() + most_s
-    idle = 0
-    while idle < 2 and time.monotonic() < deadline:
-        before = sum(recorder.counts.values())
+    queued for it, until it has taken nothing for ``quiet_s`` (other callbacks, such as the
+    stopped plant's unmatched publishers, do not count), at most ``most_s``. A recorder that
+    lagged behind a fast lockstep run would otherwise lose the samples in flight, published
+    before the signal."""
+    t0 = last = time.monotonic()
+    taken = sum(recorder.counts.values())
+    while (now := time.monotonic()) - last < quiet_s and now - t0 < most_s:
         executor.spin_once(timeout_sec=0.01)
-        idle = idle + 1 if sum(recorder.counts.values()) == before else 0
+        if (count := sum(recorder.counts.values())) != taken:
+            taken, last = count, time.monotonic()
 
 
 def overrides(values: Mapping[str, Any]) -> list[Parameter]:
