@@ -31,7 +31,7 @@ import numpy as np
 PENDING = 8
 #: Delays kept; the shortest is the measured delay.
 ECHOES = 9
-#: Delays needed before the median is taken.
+#: Delays needed before the shortest is taken.
 MIN_ECHOES = 3
 #: How closely an effort equals a command (relative to the command's size, at least 1e-9 N m).
 MATCH_TOLERANCE = 1e-9

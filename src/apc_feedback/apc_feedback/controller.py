@@ -433,14 +433,14 @@ class AdaptiveFeedback(FeedbackLaw):
         """:meth:`reset`, keeping this law's commands still on their way (with lags, its next
         start plans with them as with a fallback's, :meth:`observe_command`): for a change of
         what it is told of its samples while it commands."""
-        on_the_way: list[tuple[int, np.ndarray]] = []
-        if self._started and self.config.input_lags:
-            k, u_n = self._k_prev, self._u_n_prev
-            command = np.clip(u_n + self._du_prev, self._effort_floor, self._effort_limit)
-            on_the_way = [(k, command - u_n)]
-            on_the_way += [(k - 1 - j, row.copy()) for j, row in enumerate(self._inputs)]
-        self.reset()
-        self._observed.extend(on_the_way[: self._observed.maxlen])
+        if not (self._started and self.config.input_lags):
+            self.reset()
+            return
+        k, u_n, du = self._k_prev, self._u_n_prev, self._du_prev
+        older = [(k - 1 - j, row.copy()) for j, row in enumerate(self._inputs)]
+        self.reset()  # new arrays: u_n and du above stay as they were
+        self._observed.extend(older)
+        self.observe_command(k, u_n, du)  # the newest, within the effort limits
 
     def expect_velocity_stencil(self, stencil: VelocityStencil | None) -> None:
         """From the next (re)start, the samples' velocity is ``stencil`` of past positions

@@ -332,11 +332,10 @@ class RobotLoop:
         the delay to the arm applying a command and the samples' velocity (see :meth:`_start`)."""
         sampler = self.sampler
         self._velocity_kind = sampler.velocity_kind
-        self._told_delay_ns = self._measured_delay_ns()
+        self._told_delay_ns = measured = self._measured_delay_ns()
         expect = getattr(self.law, "expect_input_delay", None)
         if expect is None:
             return
-        measured = self._measured_delay_ns()
         if measured is not None:
             expect(measured * 1e-9, (), True)
         else:

@@ -228,7 +228,7 @@ class DifferenceCheck:
     """
 
     def __init__(self) -> None:
-        self._periods: list[float] = []
+        self._periods: deque[float] = deque(maxlen=DIFFERENCE_STATES)
         self.period_s: float | None = None  # the period the velocity differences over, or None
 
     def reset(self) -> None:
@@ -246,8 +246,6 @@ class DifferenceCheck:
             self.reset()
             return
         self._periods.append(period)
-        if len(self._periods) > DIFFERENCE_STATES:
-            self._periods.pop(0)
         if len(self._periods) == DIFFERENCE_STATES:
             self.period_s = float(np.median(self._periods))
 
