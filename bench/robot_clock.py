@@ -235,7 +235,7 @@ class WallRun:
 
         robot_file = benchlib.CONFIG / rc.ROBOT_FILES[s.arm]
         cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(robot_file)]
-        self._spawn("controllers", cmd + controller_arguments(s.arm, s.law))
+        self._spawn("controllers", cmd + controller_arguments(s.arm, s.law, s.effects))
 
     def log_tail(self) -> str:
         return benchlib.log_tail(self.workdir, self.spec.tag)

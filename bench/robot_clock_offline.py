@@ -20,13 +20,14 @@ reports the median and the worst run's max error over the joints, the worst fina
 wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--armature] [--alpha-model A] [--json FILE]
+        [--ideal-velocity] [--no-armature] [--alpha-model A] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
 ``--ideal-velocity``: the ideal arm's driver publishes the arm's exact velocity as well (what
-``robot_sim`` does by default), instead of positions only. ``--armature``: the controllers'
-model of a physical arm has its rotor inertia (the controller nodes' ``armature`` parameter).
+``robot_sim`` does by default), instead of positions only. The controllers of a physical arm
+are told its rotor inertia (the controller nodes' ``armature``), as the wall-time benchmark's
+are (:func:`apc_lab.robot_compare.controller_armature`); ``--no-armature``: not told.
 ``--alpha-model A``: the recommended preset with ``alpha_model`` A.
 """
 
@@ -136,7 +137,7 @@ def measure(
     arms: tuple[str, ...] = ARMS,
     settings: dict | None = None,
     ideal_velocity: bool = False,
-    armature: bool = False,
+    armature: bool = True,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
     preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
@@ -241,9 +242,9 @@ def main() -> None:
         help="the ideal arm's states carry its exact velocity (a driver that publishes one)",
     )
     parser.add_argument(
-        "--armature",
+        "--no-armature",
         action="store_true",
-        help="the controllers' model of a physical arm has its rotor inertia",
+        help="the controllers' model of a physical arm lacks its rotor inertia",
     )
     parser.add_argument("--alpha-model", type=float, help="the preset's alpha_model instead")
     args = parser.parse_args()
@@ -254,7 +255,7 @@ def main() -> None:
             settings["relinearize"] = False
         if args.alpha_model is not None:
             settings["alpha_model"] = args.alpha_model
-    cells = measure(tuple(args.arms), settings, args.ideal_velocity, args.armature)
+    cells = measure(tuple(args.arms), settings, args.ideal_velocity, not args.no_armature)
     print()
     print(markdown(cells), end="")
     if args.json:
@@ -262,7 +263,7 @@ def main() -> None:
             "simulated_time": True,
             "relinearize": not args.no_relinearize,
             "ideal_velocity": args.ideal_velocity,
-            "armature": args.armature,
+            "armature": not args.no_armature,
             "alpha_model": args.alpha_model,
             "cells": cells,
         }

@@ -62,6 +62,18 @@ def test_parameters_are_declared_by_the_nodes_they_go_to():
             assert set(params[node]) <= names, (node, set(params[node]) - names)
 
 
+def test_the_controllers_of_a_physical_puma_are_told_its_rotor_inertia():
+    """Every law's: a geared arm's user tells it; not the ideal arm's, the Panda's (its preset
+    adds none) or that of one effect alone (what the unknown effect costs)."""
+    rotor = list(puma560_effects().armature_kgm2)
+    for law in ("computed torque", "PID", "adaptive recommended"):
+        told = rc.node_parameters(rc.RobotCase("puma3", "c", "physical", law))["robot_node"]
+        np.testing.assert_allclose(told["armature"], rotor)
+    for arm, effects in (("puma3", "ideal"), ("puma3", "armature"), ("panda", "physical")):
+        params = rc.node_parameters(rc.RobotCase(arm, "c", effects, "PID"))["robot_node"]
+        assert "armature" not in params, (arm, effects)
+
+
 def test_one_effect_alone_is_the_presets_value_of_it():
     friction = rc.effect_parameters("puma3", "friction")
     preset = puma560_effects()
@@ -161,19 +173,17 @@ def test_one_run_through_the_robot_interface_with_every_effect_on(tmp_path, monk
     """MuJoCo's PUMA with friction, rotor inertia, quantisation, a differenced velocity and a
     one-period delay, driven through /joint_states and /effort_controller/commands in sim time,
     every command 0.5 ms on its way (it acts from the driver's next cycle); robot_node told the
-    arm's rotor inertia (``armature``) with the slower model (``adaptive.alpha_model`` 1e-5),
-    and finding from the states that the velocity is the drive's backward difference: the
-    recommended preset tracks the 5 lb move without a hand-over (measured: max 0.29 / 0.07 /
+    arm's rotor inertia (``armature``, as in every physical case) with the slower model
+    (``adaptive.alpha_model`` 1e-5) and finding from the states that the velocity is the
+    drive's backward difference: the recommended preset tracks the 5 lb move without a
+    hand-over (measured: max 0.29 / 0.07 /
     0.11 deg, final 0.03 / 0.04 / 0.11 deg; not told, 0.87 / 3.18 / 7.48 deg with a hand-over:
     docs/robot.md, "A driver's differenced velocity")."""
-    from apc_plant_sim.effects import puma560_effects
-
     case = rc.RobotCase("puma3", "c", "physical", "adaptive recommended")
     parameters = rc.node_parameters
 
     def told(c):
         values = parameters(c)
-        values["robot_node"]["armature"] = list(puma560_effects().armature_kgm2)
         values["robot_node"]["adaptive.alpha_model"] = 1e-5
         return values
 

@@ -348,11 +348,14 @@ class RobotLoop:
     def _measured_delay_ns(self) -> int | None:
         """The delay the driver's effort shows, where the law is told it: a whole sample or more
         (the sample's own command cannot act before the next sample, which a split learnt from
-        closed-loop data fills with a channel the plan leans on), within the lags the law can
-        carry with the samples' velocity; else None (the law assumes a driver period and scores
-        two, as without a measurement). docs/robot.md, "When the arm applies a command"."""
+        closed-loop data fills with a channel the plan leans on), or at most half a driver
+        period (applied over its state's own cycle: a simulator in lockstep with its
+        controllers, where Eq. 16 holds as it stands and the driver period the law would assume
+        is a whole sample too late on a slow driver), within the lags the law can carry with
+        the samples' velocity; else None (the law assumes a driver period and scores two).
+        docs/robot.md, "When the arm applies a command"."""
         measured = self.echo.delay_ns
-        if measured is None or measured < self.period_ns:
+        if measured is None or self.period_ns > measured > self.sampler.driver_period_ns // 2:
             return None
         stencil = self.sampler.velocity_stencil()
         needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)

@@ -95,7 +95,8 @@ SUMMARY = (
     "answers, so it acts from the driver's next cycle, as on a robot's clock. "
     "`physical`: friction, rotor inertia, encoder quantisation, the velocity differenced by the "
     "drive from quantised positions over one driver period and a one-driver-period command "
-    "delay, from each arm's data (apc_plant_sim/effects.py). The pickup: 5 lb picked up "
+    "delay, from each arm's data (apc_plant_sim/effects.py); the controllers are told the "
+    "rotor inertia (`armature`), as a geared arm's user tells it. The pickup: 5 lb picked up "
     f"{PICKUP_AFTER_S:g} s into the move. Cells: max / final error (deg)."
 )
 CASES = ("a", "b", "c", "pickup")
@@ -163,6 +164,19 @@ PHYSICAL_PRESETS = {"puma3": "puma560", "panda": "panda"}
 ARM_EFFECTS = {"puma3": puma560_effects, "panda": panda_effects}
 #: MuJoCo's own dynamics and integrator: an engine no one here wrote.
 ENGINE = "mujoco"
+
+
+def controller_armature(arm: str, effects: str) -> list[float] | None:
+    """The rotor inertia the controllers are told (kg m^2 per joint, the controller nodes'
+    ``armature``): the physical arm's, as a user configures a geared arm from its drives' data
+    (motor inertia times gear ratio squared; a URDF cannot carry it); None for the ideal arm, an
+    arm without it (the Panda's preset) and one effect alone (what each unknown effect costs).
+    What the controllers still do not know: the payload, friction, quantised encoders, the
+    drive's differenced velocity and its delay."""
+    if effects != "physical":
+        return None
+    values = ARM_EFFECTS[arm]().per_joint("armature_kgm2", len(arm_scenario(arm, "c").q_start_deg))
+    return values.tolist() if values.any() else None
 
 
 @dataclass(frozen=True)
@@ -253,6 +267,9 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
         "autostart": True,
         **law_parameters(controller, settings),
     }
+    armature = controller_armature(case.arm, case.effects)
+    if armature is not None:
+        robot_node["armature"] = armature
     sim = case.timing == "sim"
     robot_sim = {
         **shared,

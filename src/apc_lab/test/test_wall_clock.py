@@ -4,12 +4,14 @@ wall time: not here)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from apc_lab import wall_clock
+from apc_plant_sim.effects import puma560_effects
 
 T_NS = 10_000_000  # 10 ms sample grid
 K0 = 1_000  # the first sample's index: stamps are kT on the driver's (system) clock
@@ -204,15 +206,30 @@ def test_the_adaptive_law_runs_the_preset_not_the_robot_files_per_arm_override(
     monkeypatch.setitem(rc.ROBOT_FILES, "panda", str(own))
     preset = law_parameters("adaptive", PRESETS["recommended"]())["adaptive.q_velocity"]
     assert preset != 10.0  # the file's own value
-    args = wall_clock.controller_arguments("panda", "adaptive recommended")
+    args = wall_clock.controller_arguments("panda", "adaptive recommended", "physical")
     assert f"robot_node:adaptive.q_velocity:={preset!r}" in args
     assert 'robot_node:controller:="adaptive"' in args
     assert "robot_node:autostart:=false" in args and "robot_node:path_tolerance:=[0.0]" in args
-    shipped = wall_clock.controller_arguments("panda", wall_clock.ROBOT_FILE_LAW)
+    shipped = wall_clock.controller_arguments("panda", wall_clock.ROBOT_FILE_LAW, "physical")
     assert not any("adaptive." in a for a in shipped)  # the file's own values stand
-    pid = wall_clock.controller_arguments("panda", "PID")
+    pid = wall_clock.controller_arguments("panda", "PID", "physical")
     assert 'robot_node:controller:="pid"' in pid
     assert not any("adaptive." in a for a in pid)
+    assert not any("armature" in a for a in pid)  # the Panda's drives add none
+
+
+def test_a_physical_arm_s_rotor_inertia_is_told_to_every_law():
+    """The physical PUMA's drives add G^2 Jm at each joint (robot_sim's ``puma560``); every
+    law's controllers are told it, as its user configures a geared arm; the ideal arm none."""
+    rotor = [round(v, 3) for v in puma560_effects().armature_kgm2]
+    for law in ("computed torque", "PID", "adaptive recommended"):
+        args = wall_clock.controller_arguments("puma3", law, "physical")
+        told = [a for a in args if a.startswith("robot_node:armature:=")]
+        assert len(told) == 1, args
+        assert [round(v, 3) for v in json.loads(told[0].split(":=", 1)[1])] == rotor
+        assert not any(
+            "armature" in a for a in wall_clock.controller_arguments("puma3", law, "ideal")
+        )
 
 
 def test_robot_sim_runs_case_c_on_wall_time_at_the_cells_rate():
