@@ -89,12 +89,15 @@ def test_the_plan_closed_around_its_own_model_has_no_pole_at_the_nyquist_frequen
 
 @pytest.mark.parametrize("hold_s", [0.91, 1.01])
 def test_a_hold_of_an_odd_number_of_samples_no_longer_loses_the_panda(hold_s):
-    """The law alone, the move after a hold of 91 or 101 samples: without the weight the
-    inputs' ringing on the hold meets the move's end in a phase that loses the arm within
-    50 ms of it (measured: lost after 8 of 20 hold lengths from 0.90 to 1.09 s, every one of
-    an odd number of samples; tracked within 0.36-0.43 deg after the others); with the
-    preset's weight it tracks after every one of them (0.36-0.37 deg)."""
-    assert _panda_hold_and_move(hold_s, q_input_change=0.0).max_tracking_error_deg() > 90.0
+    """The law alone, the move after a hold of 91 or 101 samples: without the weight, and
+    with a model that moves as fast as ``alpha_model`` 1e-3 lets it, the inputs' ringing on
+    the hold meets the move's end in a phase that loses the arm within 50 ms of it (measured:
+    lost after 8 of 20 hold lengths from 0.90 to 1.09 s, every one of an odd number of
+    samples; tracked within 0.36-0.43 deg after the others); with the preset's weight it
+    tracks after every one of them (0.36-0.37 deg; with the preset's slow model, 1e-5, 0.48
+    deg, and 0.47 without the weight too)."""
+    lost = _panda_hold_and_move(hold_s, q_input_change=0.0, alpha_model=1e-3)
+    assert lost.max_tracking_error_deg() > 90.0
     run = _panda_hold_and_move(hold_s)
-    assert run.max_tracking_error_deg() < 0.5
+    assert run.max_tracking_error_deg() < 0.6
     assert run.tracking_error_deg()[-1].max() < 0.05

@@ -169,25 +169,16 @@ def test_report_says_who_wins_and_where_the_goal_fails():
 
 
 @pytest.mark.ros
-def test_one_run_through_the_robot_interface_with_every_effect_on(tmp_path, monkeypatch):
+def test_one_run_through_the_robot_interface_with_every_effect_on(tmp_path):
     """MuJoCo's PUMA with friction, rotor inertia, quantisation, a differenced velocity and a
     one-period delay, driven through /joint_states and /effort_controller/commands in sim time,
     every command 0.5 ms on its way (it acts from the driver's next cycle); robot_node told the
-    arm's rotor inertia (``armature``, as in every physical case) with the slower model
-    (``adaptive.alpha_model`` 1e-5) and finding from the states that the velocity is the
-    drive's backward difference: the recommended preset tracks the 5 lb move without a
-    hand-over (measured: max 0.29 / 0.07 /
+    arm's rotor inertia (``armature``, as in every physical case) and finding from the states
+    that the velocity is the drive's backward difference: the recommended preset tracks the
+    5 lb move without a hand-over (measured: max 0.29 / 0.07 /
     0.11 deg, final 0.03 / 0.04 / 0.11 deg; not told, 0.87 / 3.18 / 7.48 deg with a hand-over:
     docs/robot.md, "A driver's differenced velocity")."""
     case = rc.RobotCase("puma3", "c", "physical", "adaptive recommended")
-    parameters = rc.node_parameters
-
-    def told(c):
-        values = parameters(c)
-        values["robot_node"]["adaptive.alpha_model"] = 1e-5
-        return values
-
-    monkeypatch.setattr(rc, "node_parameters", told)
     outcome = rc.run_case(case, tmp_path, timeout_s=60.0)
     assert outcome.ok, outcome.message
     metrics = rc.measure(outcome.path)

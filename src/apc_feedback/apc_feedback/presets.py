@@ -46,10 +46,13 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     integral action on the position error, the RLS wind-up guard, and a projection that refuses
     RLS steps making a diagonal entry of Ĝ's velocity block (≈ T D⁻¹) non-positive (a payload
     picked up mid-motion otherwise flips Ĝ and the law saturates). ``alpha`` is ``P(0)`` of ŵ
-    alone: F̂ and Ĝ start from Eq. 33 with ``P(0) = 1e-3`` (``alpha_model``), so a sample
-    moves them as far as ``alpha_model |δu|²`` against 1 allows (inputs of ~30 N m, a move or a
-    payload, count; a hold's little): a late command on a hold, which robot mode starts every
-    activation with, must not move the model. The input lags plan over the inputs on their
+    alone: F̂ and Ĝ start from Eq. 33 with ``P(0) = 1e-5`` (``alpha_model``), so a sample
+    moves them as far as ``alpha_model |δu|²`` against 1 allows: a late command on a hold,
+    which robot mode starts every activation with, must not move the model, and on a robot
+    it must not fit what Eq. 16 does not describe (a jittering delay, quantised positions,
+    friction) while the prior, which follows the set point and is told the delay and the
+    velocity robot mode measures, is right; 1e-3 loses the physical PUMA at 250 Hz and costs
+    the Panda there (docs/robot.md, "A slower model"). The input lags plan over the inputs on their
     way, and ``q_input_change`` weighs the planned input's change on the velocity it makes, so
     that the law does not keep its own inputs ringing at the Nyquist frequency, which sampled
     positions do not see (:mod:`apc_feedback.lagged_control`). Why these values and not
@@ -65,7 +68,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "q_integral": 1e6,
         "integral_limit": 0.05,
         "project_g": True,
-        "alpha_model": 1e-3,
+        "alpha_model": 1e-5,
         "input_lags": 2,
         "relinearize": True,
         "q_input_change": 0.003,

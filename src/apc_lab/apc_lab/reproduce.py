@@ -234,6 +234,8 @@ def acceptance(planned: Sequence[Planned], metrics: dict[str, dict], preset: str
                 "smaller_final_error_every_joint": fin_ok,
                 "peak_torque_ratio_to_ct": round(ratio, 3),
                 "max_error_deg": [round(v, 4) for v in m["max_error_deg"]],
+                "final_error_deg": [round(v, 4) for v in m["final_error_deg"]],
+                "computed_torque_final_error_deg": [round(v, 4) for v in ct["final_error_deg"]],
             }
     return result
 
