@@ -16,7 +16,9 @@ the drive's differenced velocity, a one-driver-period command delay); the 3-join
 the Franka Panda, each carrying robot_compare's case-(c) payload (5 lb; at the PUMA's wrist
 centre) that the controllers do not know; the laws computed torque, the JTC-style PID and the
 adaptive law with the recommended preset as the robot file ships it, minus any per-arm
-``adaptive.*`` override a robot file carries (the shipped ones carry none). The robot
+``adaptive.*`` override a robot file carries (the shipped ones carry none); on a physical
+PUMA every law is told the arm's rotor inertia (``armature``, as its user tells a geared
+arm's: :func:`apc_lab.robot_compare.controller_armature`). The robot
 file's ``path_tolerance`` is opened (0: no check) for every law, so that every run finishes
 and the loss rule below is the benchmark's, not the node's abort.
 

@@ -43,7 +43,7 @@ import numpy as np
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop
 from apc_feedback.supervisor import SupervisorConfig
-from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
+from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.wall_clock import LOST_DEG
 from apc_plant_sim.effects import ArmEffects
@@ -71,13 +71,15 @@ def one_run(
     settings: dict | None = None,
     ideal_velocity: bool = False,
     setup: Callable[[RobotLoop], object] | None = None,
-    armature: bool = False,
+    armature: bool = True,
 ) -> dict:
     """Run ``index`` of a cell: max and final error per joint (deg), hand-overs.
 
     ``effects``: one of :data:`EFFECTS`, or the arm's effects themselves (in MuJoCo, as
     ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before
-    activation); ``armature``: the controllers know a physical arm's rotor inertia.
+    activation); ``armature``: the controllers of a ``physical`` arm are told its rotor inertia
+    (:func:`controller_armature`; never for effects given as themselves: what they cost
+    unknown).
     """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
@@ -99,11 +101,9 @@ def one_run(
         settings=settings,
         velocity=True if ideal_velocity else None,
         setup=setup,
-        armature=(
-            arm_effects.per_joint("armature_kgm2", len(scenario.q_goal_deg))
-            if armature and arm_effects is not None
-            else None
-        ),
+        armature=controller_armature(arm, effects)
+        if armature and isinstance(effects, str)
+        else None,
     )
     errors = run.tracking_error_deg()
     return {

@@ -75,8 +75,10 @@ def tell(effects: ArmEffects, driver_period: float) -> Callable[[RobotLoop], Non
         law = loop.law
         expect_delay, expect_stencil = law.expect_input_delay, law.expect_velocity_stencil
 
-        def expect_input_delay(seconds: float, candidates: tuple[float, ...] = ()) -> None:
-            expect_delay(periods * driver_period, ())
+        def expect_input_delay(
+            seconds: float, candidates: tuple[float, ...] = (), exact: bool = False
+        ) -> None:
+            expect_delay(periods * driver_period, (), exact)
 
         def expect_velocity_stencil(stencil: VelocityStencil | None) -> None:
             if stencil is None and difference:

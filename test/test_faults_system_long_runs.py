@@ -89,9 +89,9 @@ def test_a_quarter_hour_with_the_recommended_preset_stays_bounded():
     """A quarter of an hour of simulated time (90,000 samples) of moves, holds up to 20 s and
     payload changes (0-5 lb, picked up at the start of moves), offline, with the recommended
     preset: every sample finite, trace(P) never above trace(P(0)), no refused RLS update,
-    tracking error bounded (measured 0.22 deg). The whole hour takes 2-4 minutes, too long
-    for the suite: ``bench/long_run.py --config recommended`` runs it (measured: 618 moves, 205
-    payload steps, worst 0.22 deg during a move, 0.13 deg holding).
+    tracking error bounded. The whole hour takes 2-4 minutes, too long for the suite:
+    ``bench/long_run.py --config recommended`` runs it (measured: 618 moves, 205 payload steps,
+    worst 0.30 deg during a move, 0.06 deg holding).
     """
     r = run_long(CONFIGS["recommended"], 900.0, segment_s=300.0)
     report(

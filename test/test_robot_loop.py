@@ -400,7 +400,8 @@ def _echoing(loop, law, cycles_late, states, period=T, q_step=1e-4):
             JointSample(stamp, np.full(2, q_step * i), np.zeros(2), applied.copy()), stamp
         )
         if step.command is not None:
-            queue[i + 2 + cycles_late] = loop.command.to_model(step.command)  # reported then
+            late = cycles_late(i) if callable(cycles_late) else cycles_late
+            queue[i + 2 + late] = loop.command.to_model(step.command)  # reported then
     return told
 
 
@@ -408,7 +409,7 @@ def _echoing(loop, law, cycles_late, states, period=T, q_step=1e-4):
     ("driver_ms", "cycles_late", "told_exact"),
     [(10.0, 1, True), (10.0, 0, False), (4.0, 1, False), (10.0, -1, True), (2.0, -1, True)],
 )
-def test_the_delay_the_drivers_effort_shows_is_told_where_it_is_a_sample_or_more(
+def test_the_delay_the_drivers_effort_shows_is_told_from_a_sample_or_within_its_own_cycle(
     driver_ms, cycles_late, told_exact
 ):
     """A drive that adds a cycle to a 100 Hz driver applies a command 20 ms after its state:
@@ -416,8 +417,8 @@ def test_the_delay_the_drivers_effort_shows_is_told_where_it_is_a_sample_or_more
     (``exact``). On time (10 ms, what the law assumed) or under a sample (8 ms at 250 Hz) the
     law keeps the driver period and its scored candidates. A simulator stepping in lockstep
     applies a command over its state's own cycle (0 ms, ``cycles_late`` -1): told too, since
-    the driver period the law assumed is a whole sample too late at 100 Hz (with the robot
-    files' slow model the 100 Hz MuJoCo arm in sim time sagged 4.2 deg until handed over)."""
+    the driver period the law assumed is a whole sample too late at 100 Hz (with the preset's
+    slow model the 100 Hz MuJoCo arm in sim time sagged 4.2 deg until handed over)."""
     loop, counts, logs = _loop(before=None)
     loop.law = law = _StencilPD()
     loop.activate()
@@ -432,3 +433,29 @@ def test_the_delay_the_drivers_effort_shows_is_told_where_it_is_a_sample_or_more
         assert any(f"effort shows a command applied {applied}" in t for _, t in logs), logs
     else:
         assert told[1:] == [] and counts["measured_delay_changes"] == 0 and law.restarts == 0
+
+
+def test_a_lockstep_driver_that_sometimes_applies_a_cycle_late_is_not_told_zero():
+    """Two commands in five a cycle late on a 100 Hz driver applying the others over their
+    state's own cycle (the second late one replaced by the next before it is applied): the
+    shortest delay is 0, but not every one kept is, so the law keeps the driver period it
+    assumed and its scored candidates."""
+    loop, counts, _ = _loop(before=None)
+    loop.law = law = _StencilPD()
+    loop.activate()
+    told = _echoing(loop, law, lambda i: 0 if i % 5 in (3, 4) else -1, 40)
+    assert loop.echo.delay_ns == 0 and loop.echo.longest_ns == T
+    assert told == [(T, False)] and counts["measured_delay_changes"] == 0
+
+
+def test_a_told_delay_no_longer_measured_returns_the_law_to_the_driver_period():
+    """A 250 Hz driver applying commands over their state's own cycle (0 ms, told), then at its
+    next write (4 ms, under a sample: not told): the law restarts with the driver period and
+    its candidates instead of keeping 0 ms held."""
+    loop, counts, _ = _loop(before=None)
+    loop.law = law = _StencilPD()
+    loop.activate()
+    period = round(4.0 * MS)
+    told = _echoing(loop, law, lambda i: -1 if i < 100 else 0, 250, period)
+    assert told == [(period, False), (0, True), (period, False)]
+    assert counts["measured_delay_changes"] == 2 and law.restarts == 2

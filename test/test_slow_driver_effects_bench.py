@@ -37,8 +37,8 @@ class _Law:
         self.delay: tuple | None = None
         self.stencil: object = "untold"
 
-    def expect_input_delay(self, seconds, candidates=()):
-        self.delay = (seconds, tuple(candidates))
+    def expect_input_delay(self, seconds, candidates=(), exact=False):
+        self.delay = (seconds, tuple(candidates)) + ((True,) if exact else ())
 
     def expect_velocity_stencil(self, stencil):
         self.stencil = stencil
@@ -67,6 +67,10 @@ def test_told_gives_the_drives_delay_and_differenced_velocity(sde):
     physical = _told(sde, ARM_EFFECTS["panda"](), period)
     assert physical.delay == (pytest.approx(2 * period), ())
     assert physical.stencil == VelocityStencil((0.0, period), (100.0, -100.0))
+    # robot mode's call with a delay the driver's effort shows (exact) keeps the told delay
+    sde.tell(ARM_EFFECTS["panda"](), period)(SimpleNamespace(law=physical))
+    physical.expect_input_delay(0.03, (), True)
+    assert physical.delay == (pytest.approx(2 * period), (), True)
     ideal = _told(sde, ArmEffects(), period)
     assert ideal.delay == (pytest.approx(period), ()) and ideal.stencil is None
     # robot mode's own estimate (a driver without velocity) is left as it is

@@ -47,6 +47,11 @@ class CommandEcho:
         self._effort: np.ndarray | None = None
         self.delay_ns: int | None = None  # the measured delay, None until MIN_ECHOES
 
+    @property
+    def longest_ns(self) -> int | None:
+        """The longest of the delays kept, once :attr:`delay_ns` is measured (else None)."""
+        return max(self._delays) if self.delay_ns is not None else None
+
     def reset(self) -> None:
         """Forget the delays (the driver may have changed: a gap in its states)."""
         self._pending.clear()

@@ -57,8 +57,8 @@ computed from a state is applied one driver period (plus the command's trip) aft
 same delay at every sample and in every run. Eq. 16 has no such delay; a law that models it
 (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start and learns the
 rest, or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`)
-where that is a sample or more, and the samples' velocity as the states show it (docs/robot.md,
-"A robot's clock", for what each driver rate measures).
+where that is a sample or more or within the state's own cycle, and the samples' velocity as
+the states show it (docs/robot.md, "A robot's clock", for what each driver rate measures).
 """
 
 from __future__ import annotations
@@ -348,30 +348,32 @@ class RobotLoop:
     def _measured_delay_ns(self) -> int | None:
         """The delay the driver's effort shows, where the law is told it: a whole sample or more
         (the sample's own command cannot act before the next sample, which a split learnt from
-        closed-loop data fills with a channel the plan leans on), or at most half a driver
-        period (applied over its state's own cycle: a simulator in lockstep with its
-        controllers, where Eq. 16 holds as it stands and the driver period the law would assume
-        is a whole sample too late on a slow driver), within the lags the law can carry with
-        the samples' velocity; else None (the law assumes a driver period and scores two).
-        docs/robot.md, "When the arm applies a command"."""
-        measured = self.echo.delay_ns
-        if measured is None or self.period_ns > measured > self.sampler.driver_period_ns // 2:
+        closed-loop data fills with a channel the plan leans on), or every kept delay at most
+        half a driver period (applied over its state's own cycle: a lockstep simulator, where
+        Eq. 16 holds as it stands and the driver period the law would assume is a whole sample
+        too late on a slow driver), within the lags the law can carry with the samples'
+        velocity; else None (the law assumes a driver period and scores two). docs/robot.md,
+        "When the arm applies a command"."""
+        measured, longest = self.echo.delay_ns, self.echo.longest_ns
+        if measured is None or longest is None:
+            return None
+        if measured < self.period_ns and 2 * longest > self.sampler.driver_period_ns:
             return None
         stencil = self.sampler.velocity_stencil()
         needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)
         return measured if needed <= MAX_INPUT_LAGS else None
 
     def _delay_moved(self) -> bool:
-        """Whether the measured delay differs from the one the law was told at its start by
-        half a driver period or more (a first measurement that differs from the driver period
-        the law assumed, or a driver whose timing changed)."""
-        measured = self._measured_delay_ns()
-        if measured is None:
+        """Whether, once measured, the delay the law would be told now (the measured one, else
+        the driver period) differs from the one it was told at its start by half a driver
+        period or more: a first measurement that differs from the driver period the law
+        assumed, a driver whose timing changed, or a told delay no longer measured."""
+        if self.echo.delay_ns is None:
             return False
-        told = self._told_delay_ns
-        if told is None:
-            told = self.sampler.driver_period_ns
-        return 2 * abs(measured - told) >= self.sampler.driver_period_ns
+        period = self.sampler.driver_period_ns
+        now, told = self._measured_delay_ns(), self._told_delay_ns  # a delay of 0 is told
+        now, told = (period if v is None else v for v in (now, told))
+        return 2 * abs(now - told) >= period
 
     def _follow_driver(self, k: int) -> None:
         """Robot mode learnt something of the driver since the start that the law models: the

@@ -48,8 +48,9 @@ def test_a_measured_torque_gives_no_delay_and_a_late_command_adds_none():
         echo.observe(i * 10 * P + (3 if late else 2) * P, command, P)
         echo.observe(i * 10 * P + 5 * P, command, P)  # held: no new application
     assert echo.delay_ns == P
+    assert echo.longest_ns == 2 * P  # the late ones are kept: what a delay is not always
     echo.reset()
-    assert echo.delay_ns is None
+    assert echo.delay_ns is None and echo.longest_ns is None
 
 
 def test_no_effort_or_a_torque_no_command_was_leaves_the_delay_unknown():
