@@ -175,7 +175,8 @@ def controller_armature(arm: str, effects: str) -> list[float] | None:
     drive's differenced velocity and its delay."""
     if effects != "physical":
         return None
-    values = ARM_EFFECTS[arm]().per_joint("armature_kgm2", len(arm_scenario(arm, "c").q_start_deg))
+    data = ARM_EFFECTS[arm]()
+    values = data.per_joint("armature_kgm2", len(data.counts_per_rev))
     return values.tolist() if values.any() else None
 
 
