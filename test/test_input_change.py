@@ -17,6 +17,7 @@ import pytest
 from apc_feedback.presets import recommended_settings
 from apc_lab.robot_compare import arm_scenario
 from apc_lab.robot_offline import run_robot_loop
+from apc_plant_sim.effects import panda_effects, single_effect
 
 PANDA = arm_scenario("panda", "c")
 #: The robot file's controllers: the URDF's inertias (the wall-time benchmark's robot_node).
@@ -95,9 +96,38 @@ def test_a_hold_of_an_odd_number_of_samples_no_longer_loses_the_panda(hold_s):
     lost after 8 of 20 hold lengths from 0.90 to 1.09 s, every one of an odd number of
     samples; tracked within 0.36-0.43 deg after the others); with the preset's weight it
     tracks after every one of them (0.36-0.37 deg; with the preset's slow model, 1e-5, 0.48
-    deg, and 0.47 without the weight too)."""
+    deg, and 0.47 without the weight too; with the weight raised until the law's inputs do not
+    ring while the arm does not answer, ``input_ring_limit``, 0.62 deg)."""
     lost = _panda_hold_and_move(hold_s, q_input_change=0.0, alpha_model=1e-3)
     assert lost.max_tracking_error_deg() > 90.0
     run = _panda_hold_and_move(hold_s)
-    assert run.max_tracking_error_deg() < 0.6
+    assert run.max_tracking_error_deg() < 0.7
     assert run.tracking_error_deg()[-1].max() < 0.05
+
+
+@pytest.mark.parametrize("effect", ["friction", "quantisation"])
+def test_the_panda_held_by_its_friction_on_a_100hz_driver_is_no_longer_lost(effect):
+    """The Panda in MuJoCo on a 100 Hz driver that publishes its velocity, with one effect of
+    its physical preset (Gaz et al.'s Coulomb friction, or its encoders), the law alone, the
+    grid's inertia error: the preset's plan pushes each input on its way back harder than it
+    came (radius 1.42), so its commands grow at the Nyquist frequency from the move's end,
+    where the arm comes to rest, and the arm is lost within 0.2 s (measured: friction in 5
+    runs of 5 at payloads within 1 %, encoders in 4 of 5). With the input change's weight
+    raised until the plan's inputs do not grow while the arm does not answer
+    (``input_ring_limit`` 1) it tracks within 0.91 and 0.61 deg."""
+    run = [
+        run_robot_loop(
+            2.0,
+            goal_deg=PANDA.q_goal_deg,
+            driver_ms=10.0,
+            phase_ms=3.7,
+            transport_ms=0.3,
+            payload_kg=PANDA.payload_kg * 0.99,
+            settings={**recommended_settings(), "input_ring_limit": limit},
+            effects=single_effect(effect, panda_effects()),
+            arm=PANDA,
+        )
+        for limit in (0.0, 1.0)
+    ]
+    assert run[0].max_tracking_error_deg() > 90.0
+    assert run[1].max_tracking_error_deg() < 1.0

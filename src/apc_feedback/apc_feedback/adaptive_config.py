@@ -131,6 +131,13 @@ class AdaptiveConfig:
         zero-order hold's sampling zero at z = -1), and without this weight the receding
         horizon's cheap position weight leaves the law's own inputs ringing at the Nyquist
         frequency (:mod:`apc_feedback.lagged_control`). 0 (default): none (the paper).
+    input_ring_limit : float
+        Bound on the spectral radius of the plan's own dynamics over its inputs on their way
+        (:func:`apc_feedback.lagged_control.input_ringing`: what the law's commands do while
+        the arm does not answer them). At each (re)start and every ``RING_CHECK_PERIOD_S``
+        the law doubles its weight of the input's change (from ``q_input_change``, which must
+        be > 0) until the radius is within it; a reset returns to ``q_input_change``. 0
+        (default): never checked.
     """
 
     period: float = PAPER_PERIOD_S
@@ -225,6 +232,14 @@ class AdaptiveConfig:
         1e12,
         runtime=True,
     )
+    input_ring_limit: float = setting(
+        0.0,
+        "spectral radius bound of the law's own inputs while the arm does not answer; "
+        "q_input_change is doubled until met (2+ lags; 0 = off)",
+        0.0,
+        1e3,
+        runtime=True,
+    )
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.period) and self.period > 0.0):
@@ -266,6 +281,21 @@ class AdaptiveConfig:
             trace_max=trace_max,
             alpha_model=alpha_model,
         )
+
+    def initial_p(self, G0: np.ndarray, n_joints: int, held: bool) -> np.ndarray | None:
+        """``P(0)`` with the input block of ``split_prior`` for the prior ``G0`` (2n, (L+1) n)
+        (None: the identifier's own); ``held``: a delay measured exactly, with every lag it
+        needs carried, holds the split (:data:`HELD_SPLIT_PRIOR`)."""
+        n, lags = n_joints, self.input_lags
+        split_prior = HELD_SPLIT_PRIOR if held else self.split_prior
+        if not lags or split_prior == 1.0 or self.alpha_model <= 0.0:
+            return None
+        shares = np.linalg.norm(G0[n:].reshape(n, lags + 1, n), axis=(0, 2))
+        c = shares / np.linalg.norm(shares)
+        split = np.outer(c, c) + split_prior * (np.eye(lags + 1) - np.outer(c, c))
+        P0 = np.diag(self.rls_config(n).initial_p_diagonal(n, lags))
+        P0[2 * n : -1, 2 * n : -1] = self.alpha_model * np.kron(split, np.eye(n))
+        return P0
 
     @staticmethod
     def from_dict(values: Mapping[str, Any]) -> AdaptiveConfig:

@@ -24,17 +24,19 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from apc_feedback.adaptive_config import (
-    HELD_SPLIT_PRIOR,
-    MAX_INPUT_LAGS,
-    AdaptiveConfig,
-    FeedbackError,
-)
+from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
-from apc_feedback.lagged_control import receding_controller, weigh_input_change
+from apc_feedback.lagged_control import (
+    RING_CHECK_PERIOD_S,
+    damped_input_change,
+    input_ringing,
+    receding_controller,
+    summed_inputs,
+    write_identified,
+)
 from apc_feedback.linearize import SetpointLinearization, VelocityStencil, initial_model
-from apc_feedback.optimal import OneStepControl, validate_weights
+from apc_feedback.optimal import OneStepControl, RecedingHorizonControl, validate_weights
 from apc_feedback.rls import Rls, RlsError
 
 #: With ``relinearize``, ``project_g`` refuses an identification step that would leave a
@@ -174,6 +176,7 @@ class AdaptiveFeedback(FeedbackLaw):
         # The prior moves every RELINEARIZE_PERIOD_S of samples (each sample at T >= 10 ms).
         self._relinearize_every = max(1, round(RELINEARIZE_PERIOD_S / config.period))
         self._next_relinearize = 0
+        self._ring_check_every = max(1, round(RING_CHECK_PERIOD_S / config.period))
         self.input_timing = InputTiming(config.input_delay)
         # (k, δu) another law sent while this one was idle: on their way at its next start.
         self._observed: deque[tuple[int, np.ndarray]] = deque(maxlen=MAX_INPUT_LAGS + 1)
@@ -201,6 +204,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
         self._receding = receding_controller(config, q_diagonal, R, n)
         self._change_weight = np.zeros((n, n))
+        self._input_change = config.q_input_change  # raised by _damp_input_ringing
+        self._next_ring_check: int | None = None  # the plan judged at the next sample
         self._identify_applied = config.identify_with == "applied"
 
     @property
@@ -251,6 +256,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self._du_prev = np.zeros(n)
         self._u_n_prev = np.zeros(n)
         self.integral = np.zeros(n)
+        self._input_change, self._next_ring_check = self.config.q_input_change, None
 
     def update(
         self,
@@ -294,8 +300,9 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.input_timing.choice.start(self.input_timing.delay, models)
             else:
                 F0, G0 = self._linearize(q_d, qd_d, u_n)
-            self.rls.reset(F0, G0, P0=self._initial_p(G0))
-            self._prior_input_gain = _summed_inputs(G0, self.n_joints)
+            held = self.input_timing.holds_split(self.config.input_lags, self.config.period)
+            self.rls.reset(F0, G0, P0=self.config.initial_p(G0, self.n_joints, held))
+            self._prior_input_gain = summed_inputs(G0, self.n_joints)
             # Before the first sample the arm is taken to hold its nominal torque (δu = 0), as
             # Eq. 16's first step takes it: identification starts at sample 1 with or without lags.
             self._inputs.fill(0.0)
@@ -340,7 +347,12 @@ class AdaptiveFeedback(FeedbackLaw):
             self._next_relinearize = k + self._relinearize_every
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
+        check = self._next_ring_check
+        if check is None:  # a (re)start or new weights: judged before this sample's command
+            self._damp_input_ringing(k, solved=False)
         du = self._control(dx)
+        if check is not None and k >= check:  # this sample's plan; a raised weight from the next
+            self._damp_input_ringing(k, solved=True)
         self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
@@ -378,7 +390,7 @@ class AdaptiveFeedback(FeedbackLaw):
             self.input_timing.candidates(prior, self._setpoint_model.with_delay)
         )
         n, p = self.n_joints, 2 * self.n_joints
-        gain = _summed_inputs(prior[:, p:], n)
+        gain = summed_inputs(prior[:, p:], n)
         delta = prior - self._prior_model
         # Ĝ moves with its prior's change in input space, Ĝ_j ← Ĝ_j Gv⁻¹ Gv' (Gv, Gv': the
         # old and new prior's summed velocity blocks, ≈ T D⁻¹), so Ĝ Gv⁻¹ is kept: what the arm
@@ -483,11 +495,10 @@ class AdaptiveFeedback(FeedbackLaw):
         copy of it; with ``velocity_rows`` only its velocity block (rows n..2n)."""
         n = self.n_joints
         rows = slice(n, 2 * n) if velocity_rows else slice(0, 2 * n)
-        return _summed_inputs(self.rls.model_view()[rows, 2 * n : -1], n)
+        return summed_inputs(self.rls.model_view()[rows, 2 * n : -1], n)
 
     def _control(self, dx: np.ndarray) -> np.ndarray:
-        """Optimal control of the identified model (Eq. 35, or its extensions: a receding
-        horizon, integral action, lagged inputs)."""
+        """Optimal control of the identified model (Eq. 35, or a receding horizon's)."""
         if self._receding is None:
             return self._one_step(self.rls.model_view(), dx)
         return self._receding_control(dx)
@@ -499,37 +510,51 @@ class AdaptiveFeedback(FeedbackLaw):
         ``v = δu(k)``; the inputs shift one lag per step. The horizon counts ``horizon`` steps
         after the longest lag, so the decision is weighed where it has acted. With integral
         action the model is augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C selects
-        the position rows). The identified blocks are written into the controller's model
-        every sample; its constant entries (the lags' shift, the integral's identity) were
-        written once by :func:`apc_feedback.lagged_control.receding_controller`; with
-        ``q_input_change`` and two lags or more the weight of the input's change follows the
-        identified input gain (:func:`apc_feedback.lagged_control.weigh_input_change`).
+        the position rows). The model is written by :meth:`_write_plan`.
         """
         config, n = self.config, self.n_joints
-        p, lags = 2 * n, config.input_lags
-        s = p + lags * n  # the state without the integral
-        model = self.rls.model_view()  # Θᵀ = [F G₀ … G_L w]
-        control = self._receding
-        assert control is not None
-        F, G, w, x = control.F, control.G, control.w, control.x
-        F[:p, :p] = model[:, :p]
-        G[:p] = model[:, p : p + n]
-        w[:p] = model[:, -1]
+        p, s = 2 * n, (2 + config.input_lags) * n  # s: the state without the integral
+        x = self._write_plan().x
         x[:p] = dx
-        if lags:
-            F[:p, p:s] = model[:, p + n : p + n + lags * n]
-            # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
-            x[p:s] = self._z_du[: lags * n]
-            if lags >= 2 and config.q_input_change > 0.0:
-                gain, weight = self._velocity_gain(), config.q_input_change
-                weigh_input_change(control, gain, weight, self._change_weight)
+        # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
+        x[p:s] = self._z_du[: s - p]
         if config.q_integral > 0.0:
-            T = config.period
-            np.multiply(F[:n, :s], T, out=F[s:, :s])
-            np.multiply(G[:n], T, out=G[s:])
-            np.multiply(w[:n], T, out=w[s:])
             x[s:] = self._integrate(dx)
-        return control.solve()
+        return self._receding.solve()
+
+    def _write_plan(self, weight: float | None = None) -> RecedingHorizonControl:
+        """The receding-horizon controller with the identified model written into it
+        (:func:`apc_feedback.lagged_control.write_identified`), the input change weighed at
+        ``weight`` (default: ``q_input_change`` as :meth:`_damp_input_ringing` raised it)."""
+        config, control = self.config, self._receding
+        assert control is not None
+        if weight is not None:
+            self._input_change = weight
+        weighed = config.input_lags >= 2 and self._input_change > 0.0
+        write_identified(
+            control,
+            self.rls.model_view(),
+            config.input_lags,
+            config.period if config.q_integral > 0.0 else 0.0,
+            self._velocity_gain() if weighed else None,
+            self._input_change,
+            self._change_weight,
+        )
+        return control
+
+    def _damp_input_ringing(self, k: int, solved: bool) -> None:
+        """Raise the weight of the input's change until the law's own inputs do not ring
+        (:func:`apc_feedback.lagged_control.damped_input_change`, ``input_ring_limit``), and
+        check again ``RING_CHECK_PERIOD_S`` after sample ``k``; ``solved``: first judged on the
+        plan this sample's command came from (its recursion reused: a small solve)."""
+        self._next_ring_check = k + self._ring_check_every
+        config, control = self.config, self._receding
+        limit, lags = config.input_ring_limit, config.input_lags
+        if limit <= 0.0 or control is None:
+            return
+        if solved and input_ringing(control, self.n_joints, lags, reuse=True) <= limit:
+            return
+        self._input_change = damped_input_change(self._write_plan, self._input_change, lags, limit)
 
     def _integrate(self, dx: np.ndarray) -> np.ndarray:
         """This sample's integration step of the position error, ``ξ ← ξ + T δq`` within the
@@ -549,23 +574,6 @@ class AdaptiveFeedback(FeedbackLaw):
         stuck = bool((np.minimum(speed, self._speed_prev) < v_min).any())
         self._speed_prev = speed
         return stuck
-
-    def _initial_p(self, G0: np.ndarray) -> np.ndarray | None:
-        """``P(0)`` with the input block of ``split_prior`` (None: the identifier's own); a
-        delay measured exactly, with every lag it needs carried, holds the split
-        (:data:`HELD_SPLIT_PRIOR`)."""
-        config, n = self.config, self.n_joints
-        held = self.input_timing.holds_split(config.input_lags, config.period)
-        split_prior = HELD_SPLIT_PRIOR if held else config.split_prior
-        if not config.input_lags or split_prior == 1.0 or config.alpha_model <= 0.0:
-            return None
-        lags = config.input_lags
-        shares = np.linalg.norm(G0[n:].reshape(n, lags + 1, n), axis=(0, 2))
-        c = shares / np.linalg.norm(shares)
-        split = np.outer(c, c) + split_prior * (np.eye(lags + 1) - np.outer(c, c))
-        P0 = np.diag(self.rls.config.initial_p_diagonal(n, lags))
-        P0[2 * n : -1, 2 * n : -1] = config.alpha_model * np.kron(split, np.eye(n))
-        return P0
 
     def _shift_inputs(self, applied: np.ndarray | None) -> bool:
         """Enter ``δu(k-1)`` into the regressor's inputs, the older ones one lag down; whether
@@ -590,9 +598,3 @@ class AdaptiveFeedback(FeedbackLaw):
             inputs[0] = self._du_prev
         self._inputs_known = min(self._inputs_known + 1, len(inputs))
         return self._inputs_known == len(inputs)
-
-
-def _summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
-    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (rows, (L+1) n): the effect of an input held
-    over every lag's period (a fresh array)."""
-    return np.add.reduce(G.reshape(G.shape[0], -1, n), axis=1)

@@ -23,16 +23,43 @@ summed over the lags), so one weight suits a heavy shoulder and a light wrist, c
 other periods, and scales with the rest of the plan: measured on the prior's block instead, a
 law whose Ĝ was forced to 1 % of it (it believes a torque does a hundredth of what it does)
 was held back to 4.2° where it repairs itself within 1.5°.
+
+Why the weight is raised where the plan's own inputs would grow. While the arm does not
+answer (held still by its Coulomb friction at the end of a move, a torque at its limit) the
+state error stays put and the plan's next input is a linear map of the inputs on their way;
+at the preset's cheap position weight, with a command acting a whole period after its state
+(a 100 Hz driver), that map pushes each input back harder than it came (spectral radius 1.42
+on the Panda, 1.41 on the 3-joint PUMA; 0.71 on the Panda at 250 Hz). The commands then grow
+at the Nyquist frequency until they break the arm free, and the arm is lost (the Panda with
+friction on a 100 Hz driver that publishes its velocity: every run). ``input_ring_limit``
+(:func:`input_ringing`, :func:`damped_input_change`) doubles the change's weight until that
+radius is within the limit, at each (re)start and every :data:`RING_CHECK_PERIOD_S`; on a
+driver of 250 Hz or more the preset's weight is within it already.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
 from apc_feedback.adaptive_config import AdaptiveConfig
 from apc_feedback.optimal import RecedingHorizonControl
 
-__all__ = ["receding_controller", "weigh_input_change"]
+__all__ = [
+    "damped_input_change",
+    "input_ringing",
+    "receding_controller",
+    "summed_inputs",
+    "weigh_input_change",
+    "write_identified",
+]
+
+#: How often (s) the adaptive law checks its own inputs' ringing against ``input_ring_limit``,
+#: besides each (re)start: its model moves with the set point, by a few per cent over a move.
+RING_CHECK_PERIOD_S = 0.1
+#: At most this many doublings of the input change's weight per check (x 1e6).
+MAX_RING_DOUBLINGS = 20
 
 
 def receding_controller(
@@ -60,6 +87,38 @@ def receding_controller(
     return control
 
 
+def write_identified(
+    control: RecedingHorizonControl,
+    model: np.ndarray,
+    lags: int,
+    integral_period: float,
+    velocity_gain: np.ndarray | None,
+    weight: float,
+    out: np.ndarray,
+) -> None:
+    """Write the identified model ``Θᵀ = [F G₀ … G_L w]`` (2n rows) into ``control``'s model
+    (:func:`receding_controller` wrote its constant entries): ``F``, the decision's ``G₀``, the
+    lags' ``G_j`` as the state's columns and ``w``; with ``integral_period`` T > 0 the integral's
+    rows ``T C (F δx + G δu + w)``; with ``velocity_gain`` (the identified velocity block summed
+    over the lags) the input change weighed at ``weight`` (:func:`weigh_input_change`, ``out``
+    its buffer)."""
+    p = model.shape[0]
+    n = p // 2
+    s = p + lags * n  # the state without the integral
+    F, G, w = control.F, control.G, control.w
+    F[:p, :p] = model[:, :p]
+    G[:p] = model[:, p : p + n]
+    w[:p] = model[:, -1]
+    if lags:
+        F[:p, p:s] = model[:, p + n : p + n + lags * n]
+    if velocity_gain is not None:
+        weigh_input_change(control, velocity_gain, weight, out)
+    if integral_period > 0.0:
+        np.multiply(F[:n, :s], integral_period, out=F[s:, :s])
+        np.multiply(G[:n], integral_period, out=G[s:])
+        np.multiply(w[:n], integral_period, out=w[s:])
+
+
 def weigh_input_change(
     control: RecedingHorizonControl, velocity_gain: np.ndarray, weight: float, out: np.ndarray
 ) -> None:
@@ -82,3 +141,52 @@ def weigh_input_change(
     np.negative(out, out=out)
     Q[newest, older] = out
     Q[older, newest] = out
+
+
+def input_ringing(control: RecedingHorizonControl, n: int, lags: int, reuse: bool = False) -> float:
+    """The spectral radius of the plan's own dynamics over its inputs on their way, for the
+    model and weights written into ``control``: with the arm not answering (stuck in its
+    friction, a torque at its limit, a drive that ignores it) the state error stays put and
+    the law's next input is ``δu(k) = -K₁ δu(k-1) - … - K_L δu(k-L)`` plus a constant, ``K_j``
+    the first step's gains on the lagged inputs (:meth:`RecedingHorizonControl.gain`).
+
+    Above 1 the law's commands grow at the Nyquist frequency whenever the arm stops answering:
+    a plan that compensates its inputs on their way at a cheap position weight pushes each
+    one back harder than it was (the Panda on a 100 Hz driver, the recommended preset's
+    weights: 1.42), and an arm held by its Coulomb friction at a hold is then lost once the
+    torque breaks it free (docs/robot.md, "Commands that grow while the arm does not
+    answer"). ``reuse``: the gains of the plan the last ``control.solve()`` computed (its
+    model unchanged since), at the cost of a small solve.
+    """
+    if lags < 1:
+        return 0.0
+    p = 2 * n
+    gains = control.gain(slice(p, p + lags * n), reuse)
+    companion = np.zeros((lags * n, lags * n))
+    np.negative(gains, out=companion[:n])
+    companion[n:, :-n] = np.eye((lags - 1) * n)
+    return float(np.max(np.abs(np.linalg.eigvals(companion))))
+
+
+def damped_input_change(
+    write: Callable[[float], RecedingHorizonControl], weight: float, lags: int, limit: float
+) -> float:
+    """The weight of the input's change at which the plan's own inputs do not ring:
+    ``weight`` doubled until :func:`input_ringing` of the plan ``write(weight)`` (the model
+    written, the change weighed at that weight) is within ``limit``, at most
+    :data:`MAX_RING_DOUBLINGS` times. Nothing to raise with fewer than two lags (no change in
+    the planned state to weigh) or a weight of 0 (the change not weighed)."""
+    if lags < 2 or weight <= 0.0:
+        return weight
+    for _ in range(MAX_RING_DOUBLINGS):
+        control = write(weight)
+        if input_ringing(control, control.G.shape[1], lags) <= limit:
+            break
+        weight *= 2.0
+    return weight
+
+
+def summed_inputs(G: np.ndarray, n: int) -> np.ndarray:
+    """``G₀ + G₁ + …`` of a stacked ``[G₀ G₁ …]`` (rows, (L+1) n): the effect of an input held
+    over every lag's period (a fresh array)."""
+    return np.add.reduce(G.reshape(G.shape[0], -1, n), axis=1)

@@ -458,6 +458,39 @@ class RecedingHorizonControl:
         ControlError
             If ``R + Bᵀ P B`` is not numerically positive definite or a gain is not finite.
         """
+        A, B, R = self._A, self._B, self.R
+        P, PB, S = self._riccati(), self._PB, self._S
+        np.dot(P, B, out=PB)
+        np.dot(B.T, PB, out=S)
+        S += R
+        np.dot(A, self._s, out=self._As)
+        np.dot(PB.T, self._As, out=self._b)  # Bᵀ P₁ A s
+        u = _solve_spd(S, self._b, self._finite_u)
+        return np.negative(u, out=u)
+
+    def gain(self, columns: slice = slice(None), reuse: bool = False) -> np.ndarray:
+        """The first step's gain ``K`` (a fresh array, shape (n, p + 1)) for the model in the
+        views, ``u(k) = -K (x, 1)``: what :meth:`solve` computes for any state; ``columns``
+        of it only (entries of ``(x, 1)``). What the plan does with each entry of its state
+        (the lagged inputs', :func:`apc_feedback.lagged_control.input_ringing`).
+
+        ``reuse``: from the recursion of the last :meth:`solve` (the model and weights
+        unchanged since), a small solve; else the recursion is run again.
+
+        Raises
+        ------
+        ControlError
+            As :meth:`solve`.
+        """
+        PB, S = self._PB, self._S
+        if not reuse:
+            np.dot(self._riccati(), self._B, out=PB)
+            np.dot(self._B.T, PB, out=S)
+            S += self.R
+        return _solve_spd(S, PB.T @ self._A[:, columns])
+
+    def _riccati(self) -> np.ndarray:
+        """``P_1`` of the backward recursion over the horizon (a buffer of this object's)."""
         A, B, R, Qt = self._A, self._B, self.R, self._Qt
         P, PB, S, BtPA = Qt, self._PB, self._S, self._BtPA
         for _ in range(self.horizon - 1):
@@ -474,10 +507,4 @@ class RecedingHorizonControl:
             P = self._P
             np.add(self._next, self._next.T, out=P)
             P *= 0.5  # symmetrised
-        np.dot(P, B, out=PB)
-        np.dot(B.T, PB, out=S)
-        S += R
-        np.dot(A, self._s, out=self._As)
-        np.dot(PB.T, self._As, out=self._b)  # Bᵀ P₁ A s
-        u = _solve_spd(S, self._b, self._finite_u)
-        return np.negative(u, out=u)
+        return P

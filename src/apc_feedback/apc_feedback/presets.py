@@ -55,7 +55,10 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     the Panda there (docs/robot.md, "A slower model"). The input lags plan over the inputs on their
     way, and ``q_input_change`` weighs the planned input's change on the velocity it makes, so
     that the law does not keep its own inputs ringing at the Nyquist frequency, which sampled
-    positions do not see (:mod:`apc_feedback.lagged_control`). Why these values and not
+    positions do not see (:mod:`apc_feedback.lagged_control`); ``input_ring_limit`` raises that
+    weight wherever the plan would push each input on its way back harder than it came (the
+    law's commands growing while the arm does not answer them: an arm held still by its
+    friction, a 100 Hz driver), so that they do not. Why these values and not
     others, measured: docs/paper.md, "The model prior" and the preset sweep; docs/robot.md,
     "Commands ringing at the Nyquist frequency".
     """
@@ -72,6 +75,7 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
         "input_lags": 2,
         "relinearize": True,
         "q_input_change": 0.003,
+        "input_ring_limit": 1.0,
     }
 
 

@@ -148,7 +148,7 @@ class SupervisorConfig:
         0.5, "residual trigger: time constant of the residual's running mean (s)", 1e-3, 1e3
     )
     saturation_samples: int = setting(
-        5,
+        3,
         "saturation trigger: commands clipped at the effort limit this many samples in a row",
         1,
         10000,

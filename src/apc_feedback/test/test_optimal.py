@@ -276,6 +276,26 @@ def test_receding_horizon_object_equals_the_function(horizon: int, n: int, p: in
         np.testing.assert_allclose(first, one_step, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize("horizon", [1, 3])
+def test_the_receding_horizon_gain_gives_the_control_of_every_state(horizon: int) -> None:
+    """``gain()`` is the first step's ``K`` of ``u = -K (x, 1)``: it gives ``solve()``'s input
+    for any state (to rounding), and leaves the next ``solve()`` as it was."""
+    rng = np.random.default_rng(7 + horizon)
+    n, p = 3, 12
+    control = RecedingHorizonControl(rng.uniform(0.0, 1e3, p), 1e-6 * np.eye(n), horizon)
+    control.F[...] = np.eye(p) + 0.1 * rng.standard_normal((p, p))
+    control.G[...] = rng.standard_normal((p, n))
+    control.w[...] = rng.standard_normal(p)
+    K = control.gain()
+    assert K.shape == (n, p + 1)
+    for _ in range(5):
+        x = rng.standard_normal(p)
+        control.x[...] = x
+        u = control.solve()
+        np.testing.assert_allclose(-K @ np.append(x, 1.0), u, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(control.solve(), u)
+
+
 def test_receding_horizon_object_rejects_bad_settings_and_singular_systems() -> None:
     with pytest.raises(ControlError, match="horizon"):
         RecedingHorizonControl(np.ones(2), np.eye(1), 0)
