@@ -459,3 +459,31 @@ def test_a_told_delay_no_longer_measured_returns_the_law_to_the_driver_period():
     told = _echoing(loop, law, lambda i: -1 if i < 100 else 0, 250, period)
     assert told == [(period, False), (0, True), (period, False)]
     assert counts["measured_delay_changes"] == 2 and law.restarts == 2
+
+
+def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_delay():
+    """The physical Panda in MuJoCo on a 100 Hz driver whose cycle is 10.00013 ms (a wall
+    clock's rate is never the nominal one) and whose drive adds a cycle: its effort shows
+    20.00026 ms, which with the drive's differenced velocity is three input lags, and the law
+    restarts with it as at 10 ms exactly (2.3 deg, no hand-over). Before the lag count had its
+    slack the delay asked for a fourth lag, was not told, and the law, left with the 10 ms an
+    early echo had shown, was handed over 0.17 s in (6.0 deg; on wall time the same cell
+    handed over in every run)."""
+    from apc_feedback.supervisor import SupervisorConfig
+    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
+
+    panda = arm_scenario("panda", "c")
+    run = run_robot_loop(
+        1.0,
+        goal_deg=panda.q_goal_deg,
+        driver_ms=10.00013,
+        phase_ms=3.7,
+        transport_ms=0.3,
+        payload_kg=panda.payload_kg,
+        supervisor=SupervisorConfig(),
+        effects=ARM_EFFECTS["panda"](),
+        arm=panda,
+    )
+    assert any("now models a command acting 20.0 ms" in text for _, text in run.lines)
+    assert run.counts["supervisor.handovers"] == 0
+    assert run.max_tracking_error_deg() < 3.0

@@ -217,11 +217,19 @@ class VelocityStencil(NamedTuple):
     weights: tuple[float, ...]
 
 
+#: A delay this fraction of a period past a whole number of periods needs no lag more (its
+#: share of one is under this): a delay measured on a driver's clock carries its estimated
+#: period (a 100 Hz driver at 10.00013 ms showed 20.00026 ms, which asked for a fourth lag,
+#: one more than a model carries, so the delay was not told and the law tripped).
+LAG_SLACK = 0.01
+
+
 def stencil_lags(stencil: VelocityStencil | None, period: float, delay: float) -> int:
     """The input lags the exact model of a sample needs: the inputs that acted over the
-    stencil's span or are still on their way, ``ceil((delay + span) / T)``."""
+    stencil's span or are still on their way, ``ceil((delay + span) / T)`` (within
+    :data:`LAG_SLACK` of a whole number, that number)."""
     span = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
-    return math.ceil((delay + span) / period - 1e-9)
+    return max(0, math.ceil((delay + span) / period - LAG_SLACK))
 
 
 #: ``c₂, c₃`` of Eq. 33b's series ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` in each form.

@@ -235,6 +235,20 @@ def _sampled(A, B, delay, lags, stencil=PARABOLA):
     return sampled_coordinates(F, series, T, delay, stencil, lags)
 
 
+def test_a_measured_delay_a_hair_past_whole_periods_needs_no_lag_more():
+    """A drive's two cycles measured on a 100 Hz driver whose period the stamps give as
+    10.00013 ms: 20.00026 ms with a velocity differenced over 10 ms is three lags, as 20 ms
+    is (a fourth, beyond what a model carries, kept the delay from being told); a whole
+    hundredth of a period more is a lag more."""
+    difference = VelocityStencil((0.0, T), (1.0 / T, -1.0 / T))
+    assert stencil_lags(difference, T, 0.020) == 3
+    assert stencil_lags(difference, T, 0.02000026) == 3
+    assert stencil_lags(difference, T, 0.0199997) == 3
+    assert stencil_lags(difference, T, 0.0202) == 4
+    assert stencil_lags(None, T, 0.0) == 0
+    assert stencil_lags(None, T, 0.004) == 1
+
+
 @pytest.mark.parametrize("delay", [0.0, 0.004, 0.010, 0.013])
 def test_the_sampled_model_predicts_the_estimated_velocity_of_an_arm(puma, delay):
     """The PUMA linearised at the paper's start, run as a continuous system with each command
