@@ -61,3 +61,18 @@ def test_no_effort_or_a_torque_no_command_was_leaves_the_delay_unknown():
         silent.observe(i * MS + 2 * MS, None, MS)
         other.observe(i * MS + 2 * MS, np.full(2, 100.0 + i), MS)
     assert silent.delay_ns is None and other.delay_ns is None
+
+
+def test_one_shorter_echo_is_not_the_delay():
+    """A drive that adds a cycle and applies the first command a cycle early (its buffer
+    empty at the start): the echoes are one period, then two; the delay is two periods from
+    the first measurement on, the shortest seen twice."""
+    echo = CommandEcho()
+    P = 10 * MS
+    for i in range(MIN_ECHOES + 3):
+        command = np.full(2, float(i + 1))
+        echo.sent(i * 10 * P, command)
+        echo.observe(i * 10 * P + (2 if i == 0 else 3) * P, command, P)
+        if echo.delay_ns is not None:
+            assert echo.delay_ns == 2 * P
+    assert echo.delay_ns == 2 * P and echo.longest_ns == 2 * P
