@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from support.panda import panda_100hz_move
 
 from apc_feedback.presets import recommended_settings
 from apc_lab.robot_compare import arm_scenario
@@ -116,16 +117,11 @@ def test_the_panda_held_by_its_friction_on_a_100hz_driver_is_no_longer_lost(effe
     raised until the plan's inputs do not grow while the arm does not answer
     (``input_ring_limit`` 1) it tracks within 0.91 and 0.61 deg."""
     run = [
-        run_robot_loop(
+        panda_100hz_move(
             2.0,
-            goal_deg=PANDA.q_goal_deg,
-            driver_ms=10.0,
-            phase_ms=3.7,
-            transport_ms=0.3,
             payload_kg=PANDA.payload_kg * 0.99,
             settings={**recommended_settings(), "input_ring_limit": limit},
             effects=single_effect(effect, panda_effects()),
-            arm=PANDA,
         )
         for limit in (0.0, 1.0)
     ]

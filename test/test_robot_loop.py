@@ -469,20 +469,13 @@ def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_
     slack the delay asked for a fourth lag, was not told, and the law, left with the 10 ms an
     early echo had shown, was handed over 0.17 s in (6.0 deg; on wall time the same cell
     handed over in every run)."""
-    from apc_feedback.supervisor import SupervisorConfig
-    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario
+    from support.panda import panda_100hz_move
 
-    panda = arm_scenario("panda", "c")
-    run = run_robot_loop(
-        1.0,
-        goal_deg=panda.q_goal_deg,
-        driver_ms=10.00013,
-        phase_ms=3.7,
-        transport_ms=0.3,
-        payload_kg=panda.payload_kg,
-        supervisor=SupervisorConfig(),
-        effects=ARM_EFFECTS["panda"](),
-        arm=panda,
+    from apc_feedback.supervisor import SupervisorConfig
+    from apc_lab.robot_compare import ARM_EFFECTS
+
+    run = panda_100hz_move(
+        1.0, driver_ms=10.00013, supervisor=SupervisorConfig(), effects=ARM_EFFECTS["panda"]()
     )
     assert any("now models a command acting 20.0 ms" in text for _, text in run.lines)
     assert run.counts["supervisor.handovers"] == 0

@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from support.panda import PANDA, panda_100hz_move
 from support.plans import ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
@@ -23,7 +24,6 @@ from apc_feedback.supervisor import (
     SupervisorError,
 )
 from apc_feedforward.nominal import Setpoint
-from apc_lab.robot_compare import arm_scenario
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_msgs_py import JointSample
 from apc_plant_sim.effects import ArmEffects, puma560_effects
@@ -451,16 +451,9 @@ def test_the_fallback_holds_the_panda_whose_commands_ring_on_a_100hz_driver_with
     deg; docs/robot.md, "Commands that grow while the arm does not answer": with the preset's
     limit it tracks within 0.61 deg); supervised, the tracking-error trigger hands over and
     the arm stays within 10 deg (measured 4.6)."""
-    panda = arm_scenario("panda", "c")
-    run = run_robot_loop(
-        2.5,
-        goal_deg=panda.q_goal_deg,
-        driver_ms=10.0,
-        phase_ms=3.7,
-        transport_ms=0.3,
-        payload_kg=0.99 * panda.payload_kg,
+    run = panda_100hz_move(
+        payload_kg=0.99 * PANDA.payload_kg,
         effects=ArmEffects(),
-        arm=panda,
         supervisor=SupervisorConfig(),
         settings={**recommended_settings(), "input_ring_limit": 0.0},
     )
