@@ -553,16 +553,13 @@ def test_every_command_a_period_late_on_a_100hz_driver_never_loses_the_supervise
     (1 hand-over, 7.8 deg at the first excursion, the arm at the hold, 0.00 deg, at the end;
     the goal was aborted at the first excursion). All that with the faster model of
     ``alpha_model`` 1e-3. With the preset's slower one the scores favoured one period at both
-    hand-backs (36.7 against 57.5, 70.3 against 60.4: the priors of a positions-only 100 Hz
-    driver cannot carry the estimate's span and 20 ms, and mislead), the law tripped again
-    after each and was latched out (5.9 deg, the fallback holding the arm at its 3.9 deg sag).
-    With the input change's weight raised until the law's inputs do not ring
-    (``input_ring_limit``) the law diverges later, 0.21 s into the move, every command at its
-    limit from the third sample on: the tracking-error trigger handed over at 1.5 deg with
-    joint 1 at 80 deg/s, and the fallback stopping it for the aborted goal's hold let it run
-    11.5 deg past; the saturation trigger at three clipped samples (five before) hands over
-    two samples earlier: 5.4 deg, and the hand-back models 20 ms and holds (one hand-over,
-    0.00 deg at the end; with 1e-3, 7.8 deg)."""
+    hand-backs (36.7 against 57.5, 70.3 against 60.4: a positions-only 100 Hz driver's priors
+    cannot carry the estimate's span and 20 ms), and the law was latched out (5.9 deg).
+    With ``input_ring_limit`` the law diverges later, 0.21 s into the move, every command at
+    its limit from the third sample: the tracking-error trigger handed over at 1.5 deg, joint
+    1 at 80 deg/s, which the fallback's stop for the aborted goal let run 11.5 deg past; the
+    saturation trigger at three clipped samples (five before) fires two samples earlier: 5.4
+    deg, and the hand-back models 20 ms and holds (0.00 deg at the end; 1e-3: 7.8 deg)."""
     laws = []
 
     def robot_file(loop):

@@ -135,9 +135,9 @@ class AdaptiveConfig:
         Bound on the spectral radius of the plan's own dynamics over its inputs on their way
         (:func:`apc_feedback.lagged_control.input_ringing`: what the law's commands do while
         the arm does not answer them). At each (re)start and every ``RING_CHECK_PERIOD_S``
-        the law doubles its weight of the input's change (from ``q_input_change``, which must
-        be > 0) until the radius is within it; a reset returns to ``q_input_change``. 0
-        (default): never checked.
+        the law doubles the weight of the input's change until the radius is within it, up
+        to ``2**MAX_RING_DOUBLINGS`` times ``q_input_change`` (no effect while that is 0); a
+        reset returns to ``q_input_change``. 0 (default): never checked.
     """
 
     period: float = PAPER_PERIOD_S

@@ -28,6 +28,7 @@ from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, Feedbac
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
 from apc_feedback.lagged_control import (
+    MAX_RING_DOUBLINGS,
     RING_CHECK_PERIOD_S,
     damped_input_change,
     input_ringing,
@@ -213,9 +214,9 @@ class AdaptiveFeedback(FeedbackLaw):
         return self.config
 
     def reconfigure(self, config: AdaptiveConfig) -> None:
-        """Take new weights (``q_position``, ``q_velocity``, ``r``, ``q_input_change``) at the
-        next sample and keep what was identified; the identifier's own settings cannot change
-        while it runs.
+        """Take new weights (``q_position``, ``q_velocity``, ``r``, ``q_input_change``,
+        ``input_ring_limit``) at the next sample and keep what was identified; the identifier's
+        own settings cannot change while it runs.
 
         Raises
         ------
@@ -514,13 +515,13 @@ class AdaptiveFeedback(FeedbackLaw):
         """
         config, n = self.config, self.n_joints
         p, s = 2 * n, (2 + config.input_lags) * n  # s: the state without the integral
-        x = self._write_plan().x
+        x = (control := self._write_plan()).x
         x[:p] = dx
         # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
         x[p:s] = self._z_du[: s - p]
         if config.q_integral > 0.0:
             x[s:] = self._integrate(dx)
-        return self._receding.solve()
+        return control.solve()
 
     def _write_plan(self, weight: float | None = None) -> RecedingHorizonControl:
         """The receding-horizon controller with the identified model written into it
@@ -530,16 +531,11 @@ class AdaptiveFeedback(FeedbackLaw):
         assert control is not None
         if weight is not None:
             self._input_change = weight
-        weighed = config.input_lags >= 2 and self._input_change > 0.0
-        write_identified(
-            control,
-            self.rls.model_view(),
-            config.input_lags,
-            config.period if config.q_integral > 0.0 else 0.0,
-            self._velocity_gain() if weighed else None,
-            self._input_change,
-            self._change_weight,
-        )
+        lags, weight = config.input_lags, self._input_change
+        gain = self._velocity_gain() if lags >= 2 and weight > 0.0 else None
+        integral = config.period if config.q_integral > 0.0 else 0.0
+        model = self.rls.model_view()
+        write_identified(control, model, lags, integral, gain, weight, self._change_weight)
         return control
 
     def _damp_input_ringing(self, k: int, solved: bool) -> None:
@@ -550,11 +546,14 @@ class AdaptiveFeedback(FeedbackLaw):
         self._next_ring_check = k + self._ring_check_every
         config, control = self.config, self._receding
         limit, lags = config.input_ring_limit, config.input_lags
-        if limit <= 0.0 or control is None:
-            return
-        if solved and input_ringing(control, self.n_joints, lags, reuse=True) <= limit:
-            return
-        self._input_change = damped_input_change(self._write_plan, self._input_change, lags, limit)
+        if limit <= 0.0 or control is None or lags < 2 or self._input_change <= 0.0:
+            return  # nothing to raise
+        weight, cap = self._input_change, config.q_input_change * 2.0**MAX_RING_DOUBLINGS
+        if solved:  # this sample's plan: judged at its weight already
+            if input_ringing(control, self.n_joints, lags, reuse=True) <= limit:
+                return
+            weight = min(2.0 * weight, cap)
+        self._input_change = damped_input_change(self._write_plan, weight, lags, limit, cap)
 
     def _integrate(self, dx: np.ndarray) -> np.ndarray:
         """This sample's integration step of the position error, ``ξ ← ξ + T δq`` within the

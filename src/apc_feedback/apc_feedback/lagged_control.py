@@ -34,7 +34,8 @@ at the Nyquist frequency until they break the arm free, and the arm is lost (the
 friction on a 100 Hz driver that publishes its velocity: every run). ``input_ring_limit``
 (:func:`input_ringing`, :func:`damped_input_change`) doubles the change's weight until that
 radius is within the limit, at each (re)start and every :data:`RING_CHECK_PERIOD_S`; on a
-driver of 250 Hz or more the preset's weight is within it already.
+driver of 500 Hz or more the preset's weight is within it already, at 250 Hz on an ideal arm
+(a physical arm's identified lags raise it a few times).
 """
 
 from __future__ import annotations
@@ -58,7 +59,10 @@ __all__ = [
 #: How often (s) the adaptive law checks its own inputs' ringing against ``input_ring_limit``,
 #: besides each (re)start: its model moves with the set point, by a few per cent over a move.
 RING_CHECK_PERIOD_S = 0.1
-#: At most this many doublings of the input change's weight per check (x 1e6).
+#: The input change's weight is raised to at most this many doublings of ``q_input_change``
+#: (x 1e6) in all: with a weight that large the plan holds its input from step to step, and
+#: the radius tends to 1 from one side or the other, so a limit at or under 1 may be out of
+#: reach (the weight then stays at its cap rather than growing without bound).
 MAX_RING_DOUBLINGS = 20
 
 
@@ -69,7 +73,7 @@ def receding_controller(
     does), with the model's constant entries written: the shift of the lagged inputs, the
     decision entering as ``δu(k-1)`` one step on, the integral's identity. The adaptive law
     writes the identified blocks every sample
-    (:meth:`apc_feedback.controller.AdaptiveFeedback._receding_control`)."""
+    (:func:`write_identified`)."""
     lags, integral = config.input_lags, config.q_integral > 0.0
     if lags == 0 and not integral and config.horizon == 1:
         return None
@@ -169,21 +173,24 @@ def input_ringing(control: RecedingHorizonControl, n: int, lags: int, reuse: boo
 
 
 def damped_input_change(
-    write: Callable[[float], RecedingHorizonControl], weight: float, lags: int, limit: float
+    write: Callable[[float], RecedingHorizonControl],
+    weight: float,
+    lags: int,
+    limit: float,
+    cap: float,
 ) -> float:
     """The weight of the input's change at which the plan's own inputs do not ring:
     ``weight`` doubled until :func:`input_ringing` of the plan ``write(weight)`` (the model
-    written, the change weighed at that weight) is within ``limit``, at most
-    :data:`MAX_RING_DOUBLINGS` times. Nothing to raise with fewer than two lags (no change in
+    written, the change weighed at that weight) is within ``limit``, never past ``cap`` (the
+    plan is then written at the cap). Nothing to raise with fewer than two lags (no change in
     the planned state to weigh) or a weight of 0 (the change not weighed)."""
     if lags < 2 or weight <= 0.0:
         return weight
-    for _ in range(MAX_RING_DOUBLINGS):
+    while True:
         control = write(weight)
-        if input_ringing(control, control.G.shape[1], lags) <= limit:
-            break
-        weight *= 2.0
-    return weight
+        if weight >= cap or input_ringing(control, control.G.shape[1], lags) <= limit:
+            return weight
+        weight = min(2.0 * weight, cap)
 
 
 def summed_inputs(G: np.ndarray, n: int) -> np.ndarray:

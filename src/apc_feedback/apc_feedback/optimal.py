@@ -469,9 +469,9 @@ class RecedingHorizonControl:
         return np.negative(u, out=u)
 
     def gain(self, columns: slice = slice(None), reuse: bool = False) -> np.ndarray:
-        """The first step's gain ``K`` (a fresh array, shape (n, p + 1)) for the model in the
-        views, ``u(k) = -K (x, 1)``: what :meth:`solve` computes for any state; ``columns``
-        of it only (entries of ``(x, 1)``). What the plan does with each entry of its state
+        """The first step's gain ``K`` (a fresh array, shape (n, p + 1); with ``columns``, those
+        columns only) for the model in the views, ``u(k) = -K (x, 1)``: what :meth:`solve`
+        computes for any state. What the plan does with each entry of its state
         (the lagged inputs', :func:`apc_feedback.lagged_control.input_ringing`).
 
         ``reuse``: from the recursion of the last :meth:`solve` (the model and weights

@@ -136,7 +136,8 @@ def test_the_ringing_is_the_growth_of_the_plan_s_inputs_while_the_arm_does_not_a
     assert norms[-1] / norms[-3] == pytest.approx(radius**2, rel=0.02)
     assert np.sign(inputs[-1] @ inputs[-2]) < 0  # alternating: the Nyquist frequency
 
-    weight = damped_input_change(lambda c: _prior_plan(model, c)[0], 0.003, lags, 1.0)
+    cap = 0.003 * 2.0**20
+    weight = damped_input_change(lambda c: _prior_plan(model, c)[0], 0.003, lags, 1.0, cap)
     assert weight > 0.003
     damped, _ = _prior_plan(model, weight)
     assert input_ringing(damped, N, lags) <= 1.0
@@ -145,12 +146,23 @@ def test_the_ringing_is_the_growth_of_the_plan_s_inputs_while_the_arm_does_not_a
     assert norms[-1] < 0.1 * norms[0]
 
 
-def test_nothing_is_raised_without_two_lags_or_a_weight(model):
+def test_nothing_is_raised_without_two_lags_or_a_weight_and_never_past_the_cap(model):
+    """A limit out of reach (the plan holding its input tends to a radius of 1) leaves the
+    weight at its cap, the plan written at it; fewer than two lags or no weight: nothing."""
+
     def write(weight):
         raise AssertionError("no plan is needed")
 
-    assert damped_input_change(write, 0.003, 1, 1.0) == 0.003
-    assert damped_input_change(write, 0.0, 2, 1.0) == 0.0
+    assert damped_input_change(write, 0.003, 1, 1.0, 1.0) == 0.003
+    assert damped_input_change(write, 0.0, 2, 1.0, 1.0) == 0.0
+    written = []
+
+    def plan(weight):
+        written.append(weight)
+        return _prior_plan(model, weight)[0]
+
+    assert damped_input_change(plan, 0.003, 2, 1e-3, 0.1) == 0.1
+    assert written[-1] == 0.1 and written[:2] == [0.003, 0.006]
 
 
 @pytest.mark.parametrize("limit", [0.0, 1.0])

@@ -294,6 +294,9 @@ def test_the_receding_horizon_gain_gives_the_control_of_every_state(horizon: int
         u = control.solve()
         np.testing.assert_allclose(-K @ np.append(x, 1.0), u, rtol=1e-9, atol=1e-9)
     np.testing.assert_array_equal(control.solve(), u)
+    # After a solve, its recursion reused gives the same gain, any columns of it.
+    np.testing.assert_array_equal(control.gain(reuse=True), control.gain())
+    np.testing.assert_allclose(control.gain(slice(2, 5), reuse=True), K[:, 2:5], rtol=1e-12)
 
 
 def test_receding_horizon_object_rejects_bad_settings_and_singular_systems() -> None:
