@@ -529,9 +529,8 @@ class AdaptiveFeedback(FeedbackLaw):
         ``weight`` (default: ``q_input_change`` as :meth:`_damp_input_ringing` raised it)."""
         config, control = self.config, self._receding
         assert control is not None
-        if weight is not None:
-            self._input_change = weight
-        lags, weight = config.input_lags, self._input_change
+        lags = config.input_lags
+        weight = self._input_change if weight is None else weight
         gain = self._velocity_gain() if lags >= 2 and weight > 0.0 else None
         integral = config.period if config.q_integral > 0.0 else 0.0
         model = self.rls.model_view()
@@ -550,7 +549,7 @@ class AdaptiveFeedback(FeedbackLaw):
             return  # nothing to raise
         weight, cap = self._input_change, config.q_input_change * 2.0**MAX_RING_DOUBLINGS
         if solved:  # this sample's plan: judged at its weight already
-            if input_ringing(control, self.n_joints, lags, reuse=True) <= limit:
+            if input_ringing(control, lags, reuse=True) <= limit:
                 return
             weight = min(2.0 * weight, cap)
         self._input_change = damped_input_change(self._write_plan, weight, lags, limit, cap)

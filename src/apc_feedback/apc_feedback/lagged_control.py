@@ -147,7 +147,7 @@ def weigh_input_change(
     Q[older, newest] = out
 
 
-def input_ringing(control: RecedingHorizonControl, n: int, lags: int, reuse: bool = False) -> float:
+def input_ringing(control: RecedingHorizonControl, lags: int, reuse: bool = False) -> float:
     """The spectral radius of the plan's own dynamics over its inputs on their way, for the
     model and weights written into ``control``: with the arm not answering (stuck in its
     friction, a torque at its limit, a drive that ignores it) the state error stays put and
@@ -164,6 +164,7 @@ def input_ringing(control: RecedingHorizonControl, n: int, lags: int, reuse: boo
     """
     if lags < 1:
         return 0.0
+    n = control.G.shape[1]
     p = 2 * n
     gains = control.gain(slice(p, p + lags * n), reuse)
     companion = np.zeros((lags * n, lags * n))
@@ -188,7 +189,7 @@ def damped_input_change(
         return weight
     while True:
         control = write(weight)
-        if weight >= cap or input_ringing(control, control.G.shape[1], lags) <= limit:
+        if weight >= cap or input_ringing(control, lags) <= limit:
             return weight
         weight = min(2.0 * weight, cap)
 

@@ -229,7 +229,7 @@ def stencil_lags(stencil: VelocityStencil | None, period: float, delay: float) -
     stencil's span or are still on their way, ``ceil((delay + span) / T)`` (within
     :data:`LAG_SLACK` of a whole number, that number)."""
     span = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
-    return max(0, math.ceil((delay + span) / period - LAG_SLACK))
+    return math.ceil((delay + span) / period - LAG_SLACK)
 
 
 #: ``c₂, c₃`` of Eq. 33b's series ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` in each form.

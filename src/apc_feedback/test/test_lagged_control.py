@@ -18,6 +18,7 @@ from apc_feedback.lagged_control import (
     damped_input_change,
     input_ringing,
     receding_controller,
+    summed_inputs,
     weigh_input_change,
     write_identified,
 )
@@ -102,7 +103,7 @@ def _prior_plan(model, weight: float):
     q_diagonal = np.concatenate([np.full(N, config.q_position), np.full(N, config.q_velocity)])
     control = receding_controller(config, q_diagonal, config.r * np.eye(N), N)
     lags = config.input_lags
-    velocity_gain = G[N:].reshape(N, lags + 1, N).sum(axis=1)
+    velocity_gain = summed_inputs(G[N:], N)
     theta = np.hstack([F, G, np.zeros((2 * N, 1))])
     write_identified(control, theta, lags, PERIOD, velocity_gain, weight, np.empty((N, N)))
     return control, lags
@@ -129,7 +130,7 @@ def test_the_ringing_is_the_growth_of_the_plan_s_inputs_while_the_arm_does_not_a
     (measured 1.41 on this pose); with the weight ``damped_input_change`` finds for the limit
     1 they die out."""
     control, lags = _prior_plan(model, 0.003)
-    radius = input_ringing(control, N, lags)
+    radius = input_ringing(control, lags)
     assert radius > 1.2
     inputs = _stuck_inputs(control, lags, 60)
     norms = np.linalg.norm(inputs, axis=1)
@@ -140,8 +141,8 @@ def test_the_ringing_is_the_growth_of_the_plan_s_inputs_while_the_arm_does_not_a
     weight = damped_input_change(lambda c: _prior_plan(model, c)[0], 0.003, lags, 1.0, cap)
     assert weight > 0.003
     damped, _ = _prior_plan(model, weight)
-    assert input_ringing(damped, N, lags) <= 1.0
-    assert input_ringing(_prior_plan(model, weight / 2.0)[0], N, lags) > 1.0  # the first
+    assert input_ringing(damped, lags) <= 1.0
+    assert input_ringing(_prior_plan(model, weight / 2.0)[0], lags) > 1.0  # the first
     norms = np.linalg.norm(_stuck_inputs(damped, lags, 60), axis=1)
     assert norms[-1] < 0.1 * norms[0]
 
