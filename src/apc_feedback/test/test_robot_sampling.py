@@ -403,6 +403,45 @@ def test_states_at_rest_say_nothing_and_one_that_disagrees_starts_the_count_agai
     assert check.period_s is None
 
 
+def test_a_state_after_a_missed_one_is_no_evidence_either_way():
+    """Its change spans two of the drive's cycles, its velocity one: judged, it would make the
+    difference the arm's velocity (a restart of the law) and ten states later a difference
+    again (another)."""
+    step = np.array([1e-4, -2e-4])
+    check = DifferenceCheck()
+    for _ in range(DIFFERENCE_STATES):
+        check.add(step, step / 0.001, MS, MS)
+    assert check.period_s == pytest.approx(0.001)
+    check.add(2.5 * step + np.array([0.0, 1e-5]), step / 0.001, 2 * MS, MS)  # one missed
+    check.add(step, step / 0.001, MS // 3, MS)  # an early one
+    assert check.period_s == pytest.approx(0.001)
+    check.add(step, step / 0.001 + np.array([0.0, 1e-3]), MS, MS)  # one cycle, disagreeing
+    assert check.period_s is None
+    fresh = DifferenceCheck()  # the driver's period not known yet: every state is judged
+    fresh.add(step, step / 0.001, MS)
+    fresh.add(2.5 * step + np.array([0.0, 1e-5]), step / 0.001, 2 * MS)
+    for _ in range(DIFFERENCE_STATES - 1):
+        fresh.add(step, step / 0.001, MS)
+    assert fresh.period_s is None
+
+
+def test_a_1khz_drivers_difference_stays_one_through_missed_states():
+    """The physical arm's drive at 1 kHz, every 37th state not published (a loaded machine's
+    missed cycles): the sampler tells the difference once and keeps it."""
+    s = _sampler()
+    t = np.arange(400) * 0.001
+    q = np.stack([np.sin(3 * t), 0.2 * t**2], axis=1)
+    kinds = []
+    for i in range(1, len(t)):
+        if i % 37 == 0:
+            continue  # this cycle's state was not published
+        s.offer(_state(i * MS, q[i], (q[i] - q[i - 1]) / 0.001), i * MS)
+        kinds.append(s.velocity_kind)
+    changes = [b for a, b in itertools.pairwise(kinds) if a != b]
+    assert changes == ["difference"]
+    assert s.velocity_stencil() == VelocityStencil((0.0, 0.001), (1000.0, -1000.0))
+
+
 def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_after_a_gap():
     s = _sampler(max_age=0.02)
     assert s.velocity_kind == "none"
