@@ -123,6 +123,8 @@ def run_robot_loop(
     velocity: bool | None = None,
     armature: Sequence[float] | None = None,
     effort: bool = True,
+    missed: float = 0.0,
+    missed_seed: int = 0,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -173,6 +175,10 @@ def run_robot_loop(
         Whether the states carry the torque the drive applied over the period that ended at
         their stamp (``robot_sim``'s ``publish_effort``, on by default as there), from which
         robot mode measures when a command is applied.
+    missed, missed_seed : float, int
+        The share of the driver's cycles whose state is not published, drawn with the seed: a
+        driver on a loaded machine misses cycles (``robot_sim``'s ``unpublished_cycles`` on wall
+        time; the arm moves on, no state goes out).
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -238,6 +244,7 @@ def run_robot_loop(
     if setup is not None:
         setup(loop)
     latency = latency or Latency()
+    draws = np.random.default_rng(missed_seed)
     transport = round(transport_ms * MS)
     log: list[tuple] = []
     # Before activation the brakes hold the arm (the driver has no command yet).
@@ -281,7 +288,8 @@ def run_robot_loop(
         elif kind == CYCLE:
             reading = driver.measure(now * 1e-9)
             log.append((now, reading.position.copy()))
-            if not (pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]):
+            paused = pause and pause[0] <= (now - t_act) * 1e-9 < pause[1]
+            if not paused and not (missed > 0.0 and draws.random() < missed):
                 velocity = None if reading.velocity is None else reading.velocity.copy()
                 torque = None if reading.effort is None else reading.effort.copy()
                 state = JointSample(now, reading.position.copy(), velocity, torque)
