@@ -100,7 +100,7 @@ class SupervisorConfig:
     )
     kv: float = setting(60.0, "computed-torque fallback's Kv (1/s)", 0.0, 1e9)
     error_bound: float = setting(
-        0.05,
+        0.07,
         "tracking_error trigger: |q - q_d| bound (rad) on every joint, with the error growing",
         1e-6,
         10.0,
