@@ -506,3 +506,27 @@ def test_a_1khz_driver_that_misses_cycles_keeps_its_differenced_velocity_and_the
     )
     assert run.counts["velocity_kind_changes"] == 1
     assert run.max_tracking_error_deg() < 0.6
+
+
+def test_a_driver_that_stalls_mid_move_keeps_its_differenced_velocity():
+    """The physical Panda on a 250 Hz driver whose states stop for 25 ms in the move (a stall
+    of the machine: on wall time one such run was lost): the drive is the same after it, so
+    the law is not restarted (one velocity-kind change in the run, 2.9 deg). When a gap longer
+    than max_age forgot the difference, the law restarted twice after it: 9.6 deg."""
+    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+
+    panda = arm_scenario("panda", "c")
+    run = run_robot_loop(
+        2.5,
+        goal_deg=panda.q_goal_deg,
+        driver_ms=4.0,
+        phase_ms=1.48,
+        transport_ms=0.3,
+        payload_kg=panda.payload_kg,
+        effects=ARM_EFFECTS["panda"](),
+        arm=panda,
+        armature=controller_armature("panda", "physical"),
+        pause=(0.5, 0.525),
+    )
+    assert run.counts["velocity_kind_changes"] == 1
+    assert run.max_tracking_error_deg() < 4.0

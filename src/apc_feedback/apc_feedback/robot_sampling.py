@@ -220,14 +220,15 @@ class DifferenceCheck:
     position change must have a velocity of the same sign, every joint without one none, and
     each moving joint's ``Δq / v`` is the period it was differenced over: the same on every joint,
     within half to twice the stamps' interval. :data:`DIFFERENCE_STATES` informative states in a
-    row that agree make it a difference over their median period; one that does not, or a gap in
-    the states (:meth:`reset`), makes it a velocity of the arm's again. States that say nothing
-    (the arm at rest: every position and velocity unchanged at zero) change nothing, and so does
-    a state that follows a missed one (its interval not within half a period of the driver's):
-    its change spans two cycles where the drive's difference spans one, so it is no evidence
-    either way. A driver on a loaded machine misses cycles (robot_sim at 1 kHz on wall time: 2-3
-    % of them); judged, each missed cycle made the drive's difference the arm's velocity and ten
-    states later a difference again, each change a restart of the adaptive law. A drive that
+    row that agree make it a difference over their median period; one that does not, or states
+    gone for longer than the watchdog (:meth:`reset`), makes it a velocity of the arm's again.
+    States that say nothing (the arm at rest: every position and velocity unchanged at zero)
+    change nothing, and so does a state that follows a missed one (its interval not within half
+    a period of the driver's): its change spans two cycles where the drive's difference spans
+    one, so it is no evidence either way. A driver on a loaded machine misses cycles (robot_sim
+    at 1 kHz on wall time: 1-3 % of them); judged, each missed cycle made the drive's difference
+    the arm's velocity and ten states later a difference again, each change a restart of the
+    adaptive law. A drive that
     differences in single precision or filters its difference is taken as measuring the arm's
     velocity (the law is then not told a stencil: robot mode's behaviour without the check).
     """
@@ -398,7 +399,11 @@ class RobotSampler:
                 # After a gap in the states a parabola through positions from before it is no
                 # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
                 self.velocity.reset()
-                self.difference.reset()
+                if stamp - newest.stamp_ns > self.watchdog_ns:
+                    # A driver back after the watchdog may be another; one that stalled for
+                    # less is the same drive (forgetting its difference restarted the law
+                    # twice, and on wall time a 250 Hz stall of 20 ms then lost the Panda).
+                    self.difference.reset()
             else:
                 if state.velocity is not None:
                     self.difference.add(

@@ -443,7 +443,9 @@ def test_a_1khz_drivers_difference_stays_one_through_missed_states():
 
 
 def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_after_a_gap():
-    s = _sampler(max_age=0.02)
+    """Kept through a stall shorter than the watchdog (the same drive: forgetting it restarted
+    the law twice); forgotten after states gone for longer (a driver back may be another)."""
+    s = _sampler(max_age=0.02, watchdog=0.1)
     assert s.velocity_kind == "none"
     q = np.array([0.0])
     for i in range(DIFFERENCE_STATES + 1):
@@ -452,7 +454,10 @@ def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_afte
         q = q + 1e-3 * (i + 1)
     assert s.velocity_kind == "difference"
     assert s.velocity_stencil() == VelocityStencil((0.0, 0.01), (100.0, -100.0))
-    later = (DIFFERENCE_STATES + 5) * T  # a gap in the states: the evidence is from before it
+    stalled = (DIFFERENCE_STATES + 5) * T  # 50 ms without states: beyond max_age only
+    s.offer(_state(stalled, q, 1.0), stalled)
+    assert s.velocity_kind == "difference"
+    later = stalled + 11 * T  # beyond the watchdog: the evidence is from before it
     s.offer(_state(later, q, 1.0), later)
     assert s.velocity_kind == "driver" and s.velocity_stencil() is None
     s.offer(_state(later + T, q + 0.01), later + T)  # positions only: its own estimate
