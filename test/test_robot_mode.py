@@ -390,6 +390,7 @@ def test_hold_track_and_deactivate_mid_move_in_simulated_time(graph, tmp_path):
         # velocity estimated over 4 ms and a 2 ms delay fit the preset's two lags at T = 10 ms
         assert float(diag.values["law.input_delay_ms"]) == 2.0
         assert diag.values["law.input_lags"] == "2"
+        assert diag.values["law.q_input_change"] == "0.003"  # not raised at 500 Hz
         assert diag.values["velocity_kind"] == "estimated"  # this driver sends positions only
         assert diag.values["command_applied_ms"] == "unknown"  # and no effort
         assert diag.count("path_tolerance_aborts") == 0 and diag.count("watchdog") == 0
@@ -485,3 +486,26 @@ def test_bad_parameter_stops_autostart_with_one_line():
     )
     assert out.returncode == 2
     assert "robot_node: parameter 'path_tolerance': needs 1 or 3 values, got 2" in out.stderr
+
+
+def test_diagnostics_show_the_input_change_weight_in_use_and_when_it_is_at_its_cap():
+    """``law.q_input_change``: the weight ``input_ring_limit`` raised, and a limit it could not
+    reach (the weight doubled to its cap) said there."""
+    from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+    from apc_feedback.lagged_control import MAX_RING_DOUBLINGS
+    from apc_feedback.presets import recommended_settings
+    from apc_feedback.robot_node import RobotDiagnostics
+
+    robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
+    config = AdaptiveConfig.from_dict(recommended_settings())
+    diagnostics = RobotDiagnostics("robot_node")
+    diagnostics.law = law = AdaptiveFeedback(robot.model, config)
+
+    def shown() -> str:
+        return {kv.key: kv.value for kv in diagnostics.status().values}["law.q_input_change"]
+
+    assert shown() == "0.003"
+    law.input_change_weight = 0.384
+    assert shown() == "0.384"
+    law.input_change_weight = config.q_input_change * 2.0**MAX_RING_DOUBLINGS
+    assert shown() == "3146 (at its cap: input_ring_limit out of reach)"

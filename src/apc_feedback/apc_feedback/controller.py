@@ -205,7 +205,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._one_step = OneStepControl(q_diagonal, R, config.control_form)
         self._receding = receding_controller(config, q_diagonal, R, n)
         self._change_weight = np.zeros((n, n))
-        self._input_change = config.q_input_change  # raised by _damp_input_ringing
+        # The input change's weight in use: q_input_change, raised by _damp_input_ringing.
+        self.input_change_weight = config.q_input_change
         self._next_ring_check: int | None = None  # the plan judged at the next sample
         self._identify_applied = config.identify_with == "applied"
 
@@ -257,7 +258,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self._du_prev = np.zeros(n)
         self._u_n_prev = np.zeros(n)
         self.integral = np.zeros(n)
-        self._input_change, self._next_ring_check = self.config.q_input_change, None
+        self.input_change_weight, self._next_ring_check = self.config.q_input_change, None
 
     def update(
         self,
@@ -530,7 +531,7 @@ class AdaptiveFeedback(FeedbackLaw):
         config, control = self.config, self._receding
         assert control is not None
         lags = config.input_lags
-        weight = self._input_change if weight is None else weight
+        weight = self.input_change_weight if weight is None else weight
         gain = self._velocity_gain() if lags >= 2 and weight > 0.0 else None
         integral = config.period if config.q_integral > 0.0 else 0.0
         model = self.rls.model_view()
@@ -545,14 +546,14 @@ class AdaptiveFeedback(FeedbackLaw):
         self._next_ring_check = k + self._ring_check_every
         config, control = self.config, self._receding
         limit, lags = config.input_ring_limit, config.input_lags
-        if limit <= 0.0 or control is None or lags < 2 or self._input_change <= 0.0:
+        if limit <= 0.0 or control is None or lags < 2 or self.input_change_weight <= 0.0:
             return  # nothing to raise
-        weight, cap = self._input_change, config.q_input_change * 2.0**MAX_RING_DOUBLINGS
+        weight, cap = self.input_change_weight, config.q_input_change * 2.0**MAX_RING_DOUBLINGS
         if solved:  # this sample's plan: judged at its weight already
             if input_ringing(control, lags, reuse=True) <= limit:
                 return
             weight = min(2.0 * weight, cap)
-        self._input_change = damped_input_change(self._write_plan, weight, lags, limit, cap)
+        self.input_change_weight = damped_input_change(self._write_plan, weight, lags, limit, cap)
 
     def _integrate(self, dx: np.ndarray) -> np.ndarray:
         """This sample's integration step of the position error, ``ξ ← ξ + T δq`` within the

@@ -47,7 +47,9 @@ wrong a fallback law (computed torque by default) commands until the error settl
 trigger and hand-over is counted (``supervisor.<trigger>``, ``supervisor.handovers``,
 ``supervisor.handbacks``). Its model of its input is there too: ``law.input_delay_ms`` (the
 delay its prior splits a command by: one driver period, or two once the data say the drive adds
-a cycle, ``input_delay_changes`` counting the switches) and ``law.input_lags``; and what the
+a cycle, ``input_delay_changes`` counting the switches), ``law.input_lags`` and
+``law.q_input_change`` (the input change's weight in use, as ``input_ring_limit`` raised it,
+"at its cap" where the limit is out of reach); and what the
 samples' velocity is, ``velocity_kind``: ``driver`` (taken as the arm's), ``difference`` (the
 driver's backward difference of its positions, found from its states in motion: the law then
 models its lag, restarting its identification once, ``velocity_kind_changes``) or
@@ -90,6 +92,7 @@ from apc_core.nodeutil import (
 from apc_core.params import ConfigError, Param, declare, params_from, subset
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedback.lagged_control import MAX_RING_DOUBLINGS
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -130,6 +133,11 @@ class RobotDiagnostics(Diagnostics):
         if isinstance(self.law, AdaptiveFeedback):
             self.values["law.input_delay_ms"] = f"{self.law.input_timing.delay * 1e3:.2f}"
             self.values["law.input_lags"] = str(self.law.config.input_lags)
+            weight, cap = self.law.input_change_weight, self.law.config.q_input_change
+            capped = weight > 0.0 and weight >= cap * 2.0**MAX_RING_DOUBLINGS
+            self.values["law.q_input_change"] = f"{weight:.4g}" + (
+                " (at its cap: input_ring_limit out of reach)" if capped else ""
+            )
         return super().status()
 
 

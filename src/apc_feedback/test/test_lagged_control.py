@@ -189,6 +189,8 @@ def test_the_law_s_commands_do_not_grow_on_an_arm_that_does_not_answer(model, li
         largest.append(np.abs(law.update(k, q, zero, POSE, zero, zero, u_n, None).du).max())
     if limit == 0.0:
         assert max(largest) > 150.0
+        assert law.input_change_weight == config.q_input_change
     else:
+        assert law.input_change_weight > config.q_input_change  # raised, and shown so
         assert max(largest[40:]) < 10.0
         assert max(largest[60:]) <= max(largest[40:60])
