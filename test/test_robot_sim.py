@@ -227,6 +227,41 @@ def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph,
         assert stamps == [stamps[0] + k * 2_000_000 for k in range(len(stamps))]
 
 
+def test_sim_time_missed_states(graph, tmp_path):
+    """``missed_states: 0.5``: about half the cycles between two commands publish no state
+    (counted as ``unpublished_cycles``) while time goes on; the cycle the driver waits on
+    (every fifth) always publishes, so each command is answered as before."""
+    peer = Peer(graph)
+    with robot_sim(
+        tmp_path,
+        "sim_time:=true",
+        "state_rate:=500.0",
+        "sim_cycles_per_command:=5",
+        "sim_wait_s:=30.0",
+        "missed_states:=0.5",
+    ) as proc:
+        graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
+        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
+        peer.command([0.0, 10.0, 0.0])
+        graph.spin_until(lambda: peer.clock and max(peer.clock) % 10_000_000 == 0, 10, "grid")
+        _spin_until_quiet(graph, peer)
+        start = max(peer.clock)
+        for i in range(1, 21):
+            peer.command([0.0, 10.0, 0.0])
+            graph.spin_until(lambda i=i: max(peer.clock) >= start + i * 10_000_000, 10, "cycles")
+            _spin_until_quiet(graph, peer)
+        stamps = {wire.stamp_to_ns(m.header.stamp) for _, m in peer.states}
+        between = [start + 2_000_000 * j for j in range(100) if j % 5]
+        assert all(start + 10_000_000 * i in stamps for i in range(21))  # the waited-on cycles
+        assert sum(t not in stamps for t in between) >= 20  # about half of the 80
+        graph.spin_until(
+            lambda: peer.diagnostics and "unpublished_cycles" in peer.diagnostics[-1],
+            10,
+            "the count on /diagnostics",
+        )
+        assert 20 <= int(peer.diagnostics[-1]["unpublished_cycles"]) <= 80
+
+
 @pytest.mark.parametrize(
     ("latency", "phase_ns", "periods"),
     [("0.0", 0, 1), ("0.025", 4_000_000, 4)],

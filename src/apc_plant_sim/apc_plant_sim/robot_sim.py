@@ -37,6 +37,10 @@ holds each command back from its arrival until the drive may apply it, from its 
 at or after that (:class:`apc_plant_sim.robot_driver.RobotDriver`). In sim time a command
 arrives at the time of the state it answers (the controllers compute in no simulated time):
 the driver still waits for it, then steps on and applies it once its latency has passed.
+``missed_states`` (sim time) leaves a share of the cycles unpublished, as a driver on a loaded
+machine misses cycles on wall time (``unpublished_cycles``: 1-3 % at 1 kHz on a 2-core
+machine): the arm moves on and its drive still reads it, no state goes out. A cycle the driver
+waits for a command after always publishes (in sim time the controllers answer what they get).
 """
 
 from __future__ import annotations
@@ -223,7 +227,22 @@ PARAMS: tuple[Param, ...] = (
         0.0,
         1.0,
     ),
-    Param("seed", 0, "seed of the velocity noise and of the random command latency", 0, 2**31 - 1),
+    Param(
+        "missed_states",
+        0.0,
+        "sim_time: the share of the driver's cycles that publish no state (drawn with seed; "
+        "never a cycle the driver waits for a command after), as a loaded machine's driver "
+        "misses cycles on wall time",
+        0.0,
+        0.9,
+    ),
+    Param(
+        "seed",
+        0,
+        "seed of the velocity noise, of the random command latency and of the missed states",
+        0,
+        2**31 - 1,
+    ),
     Param("sim_time", False, "own the clock: publish /clock and step as the controllers answer"),
     Param(
         "sim_wait_s",
@@ -343,6 +362,8 @@ class RobotSimNode(Node):
         self._k = 0  # sim time of the state last published: cycle k, config.cycle_time(k)
         self._t = config.phase
         self._cycles_per_command = int(values["sim_cycles_per_command"])
+        self._missed_states = float(values["missed_states"])
+        self._missed_draws = np.random.default_rng([int(values["seed"]), 1])
         self._published_wall = 0.0
         if self.sim_time:
             self._publish(self.driver.measure(self._t))
@@ -379,17 +400,19 @@ class RobotSimNode(Node):
         if self.sim_time:
             self._sim_step()
 
-    def _publish(self, reading: Reading) -> None:
+    def _publish(self, reading: Reading, state: bool = True) -> None:
+        """The state (unless ``state`` is False: a missed cycle) and, in sim time, /clock."""
         stamp_ns = round(reading.stamp * wire.NS_PER_S)
-        msg = wire.arrays_to_joint_state(
-            stamp_ns,
-            reading.names,
-            position=reading.position,
-            velocity=reading.velocity,
-            effort=reading.effort,
-            msg=self._msg,
-        )
-        self.state_pub.publish(msg)
+        if state:
+            msg = wire.arrays_to_joint_state(
+                stamp_ns,
+                reading.names,
+                position=reading.position,
+                velocity=reading.velocity,
+                effort=reading.effort,
+                msg=self._msg,
+            )
+            self.state_pub.publish(msg)
         # /clock after the state it stamps: a controller whose timer fires when the clock
         # reaches t then has the state at t in hand (one period "ahead" of its clock until then).
         if self.clock_pub is not None:
@@ -503,7 +526,14 @@ class RobotSimNode(Node):
         self._cycle(self._t)
         self._k += 1
         self._t = self.driver.config.cycle_time(self._k)
-        self._publish(self.driver.measure(self._t))
+        missed = (
+            self._missed_states > 0.0
+            and self._k % self._cycles_per_command != 0
+            and self._missed_draws.random() < self._missed_states
+        )
+        if missed:
+            self.diagnostics.count("unpublished_cycles")
+        self._publish(self.driver.measure(self._t), state=not missed)
 
     def _sim_step(self) -> None:
         """Integrate one period, then on to the next cycle that waits for a command."""
