@@ -174,10 +174,11 @@ def test_watchdog_holds_against_gravity_once_then_is_silent_and_restarts_on_fres
     loop, counts, logs = _loop()
     t = 100 * T
     loop.activate()
-    loop.on_joint_state(_state(t, 0.2), t)
+    sent = loop.on_joint_state(_state(t, 0.2), t).command
     assert loop.tick(t + 5 * T) == NOTHING  # 50 ms: still within the watchdog
     step = loop.tick(t + 6 * T)  # 60 ms without a state, watchdog 50 ms
-    assert step.command.tolist() == [2.0, 1.0]  # gravity, in command order (b, a)
+    # gravity (2, 1 in command order b, a) plus what the law added to it: here the one command
+    assert sent.tolist() != [2.0, 1.0] and step.command.tolist() == sent.tolist()
     assert loop.command_state_ns is None  # a hold computed from no sample: no timing
     assert counts["watchdog"] == 1 and logs[-1][0] == "error" and loop.faulted
     assert loop.tick(t + 7 * T) == NOTHING
@@ -271,15 +272,16 @@ def test_a_failing_law_step_sends_no_command_and_is_counted():
 
 
 def test_closed_loop_stops_the_arm_after_a_watchdog_where_it_is_then():
-    """300 ms without states: the gravity hold lets the arm sag under the payload; when states
-    come back the arm is stopped near where it is (the law keeps what it identified)."""
+    """300 ms without states: the watchdog's hold carries the payload the law learnt (0.07 deg
+    of sag; the model's gravity alone let it sag 15.8 deg); when states come back the arm is
+    stopped near where it is (the law keeps what it identified)."""
     log = run_robot_loop(2.0, pause=(0.5, 0.8)).log
     t0 = log[0][0]
     q = np.array([entry[1] for entry in log])
     seconds = np.array([(entry[0] - t0) * 1e-9 for entry in log])
     back = q[np.searchsorted(seconds, 0.84)]
-    assert np.rad2deg(np.max(np.abs(back - q[0]))) > 1.0  # it did sag
-    assert np.rad2deg(np.max(np.abs(q[seconds > 0.84] - back))) < 10.0
+    assert np.rad2deg(np.max(np.abs(back - q[0]))) < 0.5
+    assert np.rad2deg(np.max(np.abs(q[seconds > 0.84] - back))) < 1.0
     assert np.rad2deg(np.ptp(q[seconds > 1.5], axis=0).max()) < 0.05  # at rest
 
 
@@ -530,3 +532,31 @@ def test_a_driver_that_stalls_mid_move_keeps_its_differenced_velocity():
     )
     assert run.counts["velocity_kind_changes"] == 1
     assert run.max_tracking_error_deg() < 4.0
+
+
+@pytest.mark.parametrize("stall_s", [0.2, 0.3])
+def test_the_physical_panda_holds_through_a_stall_after_its_move(stall_s):
+    """The physical Panda on a 250 Hz driver, states gone for 0.2-0.3 s in the hold after the
+    move (a stalled machine: lost in one wall-time run), supervised as shipped: the watchdog's
+    hold carries the payload and the friction the law learnt, and the law takes the arm back
+    where it is (0.47 deg; with the model's gravity alone the wrist dropped, 6.7-20.5 deg and a
+    hand-over)."""
+    from apc_feedback.supervisor import SupervisorConfig
+    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+
+    panda = arm_scenario("panda", "c")
+    run = run_robot_loop(
+        3.0,
+        goal_deg=panda.q_goal_deg,
+        driver_ms=4.0,
+        phase_ms=1.48,
+        transport_ms=0.3,
+        payload_kg=panda.payload_kg,
+        effects=ARM_EFFECTS["panda"](),
+        arm=panda,
+        armature=controller_armature("panda", "physical"),
+        pause=(1.6, 1.6 + stall_s),
+        supervisor=SupervisorConfig(),
+    )
+    assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
+    assert run.max_tracking_error_deg() < 1.0

@@ -450,9 +450,9 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
         _spin_sim(graph, driver, 0.15)
         assert len(driver.commands) == n
         # states back after PAUSE_S of simulated time however long the waits above took: the
-        # sag decides whether the law's first commands after the recovery saturate (and the
-        # fallback holds) or not (the law holds, measured moving 0.12 deg over the 0.2 s
-        # below), and at 0.4 s of pause it is on that edge
+        # sag under the hold decides whether the law's first commands after the recovery
+        # saturate (and the fallback holds) or not; with the model's gravity alone 0.4 s of
+        # pause was on that edge (the hold now carries what the law added to gravity)
         _spin_sim(graph, driver, max(0.0, PAUSE_S - (driver.sim_ns - paused_ns) * 1e-9))
         # the arm (sagging under the hold) is stopped near where it is then
         driver.pause(False)

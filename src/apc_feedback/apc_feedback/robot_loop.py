@@ -24,21 +24,19 @@ reports when a command went out (:meth:`RobotLoop.command_published`). Goals com
 :meth:`RobotLoop.add_goal` and start when the motion before them ends.
 
 Starts. At activation, after a watchdog fault and after a path-tolerance abort, the plan and
-the queued goals are dropped and the sample's measured position is held (a set point that
-stays put), from that sample on. The law keeps what it identified (the payload it learned is
-still on the arm): restarted with ``F̂(0), Ĝ(0)`` of Eq. 33 and ``P(0)`` on an arm still
-moving (sagging after a watchdog hold) it diverged, with the model kept it stops the arm within
-a few samples. A start always follows a gap in ``k`` (the abort's sample and the watchdog's
-silence get no law step), so no identification step spans the change of plan.
+the queued goals are dropped and the sample's measured position is held from that sample on.
+The law keeps what it identified (the payload is still on the arm; restarted from Eq. 33 on an
+arm still sagging after a watchdog hold it diverged). A start follows a gap in ``k``: no
+identification step spans a change of plan.
 
 Faults.
 
-- Watchdog (no accepted joint state within ``watchdog``): one command holding the arm against
-  gravity at the last measured position (the controller's model, no feedback: ``du`` needs a
-  measurement there is not), then no more commands. A forward_command_controller keeps
-  applying that last command, and a driver with a command timeout applies its own policy; the
-  loop neither keeps closing a loop on a stale state nor leaves a torque computed for a moving
-  arm. A fresh state restarts the loop at the position measured then.
+- Watchdog (no accepted joint state within ``watchdog``): one command, the model's gravity at
+  the last measured position plus the average the controllers added to it over the last 0.1 s
+  (:class:`~apc_feedback.hold_torque.HoldTorque`: a payload the model does not know), then
+  none; a forward_command_controller keeps applying it (a driver with a command timeout
+  applies its own policy). No loop is closed on a stale state; a fresh state restarts the
+  loop at the position measured then.
 - Path tolerance (``|q - q_d| > tolerance`` on a joint while the set point moves, like
   joint_trajectory_controller's ``constraints.<joint>.trajectory``): the goal is aborted and
   the measured position held (a start).
@@ -48,17 +46,14 @@ Faults.
   path-tolerance abort hands the hold to the fallback too when the law's identified input gain
   is outside the supervisor's region: a diverging law must not hold the arm.
 
-Deactivation sends the same gravity hold once and stops commanding (an inactive controller
-commands nothing: another one may take the joints over).
+Deactivation sends the model's gravity hold once and stops commanding (an inactive
+controller commands nothing: another one may take the joints over).
 
-The driver's rate. A command reaches the arm at the driver's next write after it arrives: the
-samples are the driver's states and the command leaves in the state's callback, so the torque
-computed from a state is applied one driver period (plus the command's trip) after it, the
-same delay at every sample and in every run. Eq. 16 has no such delay; a law that models it
-(``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start and learns the
-rest, or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`)
-where that is a sample or more or within the state's own cycle, and the samples' velocity as
-the states show it (docs/robot.md, "A robot's clock", for what each driver rate measures).
+The driver's rate. The command leaves in its state's callback and the driver applies it at its
+next write, one driver period (plus the trip) after the state, which Eq. 16 does not model; a
+law that does (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start,
+or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`), and
+the samples' velocity as the states show it (docs/robot.md, "A robot's clock").
 """
 
 from __future__ import annotations
@@ -73,6 +68,7 @@ from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.arrays import all_true, any_true
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
+from apc_feedback.hold_torque import HoldTorque
 from apc_feedback.linearize import stencil_lags
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
@@ -205,6 +201,7 @@ class RobotLoop:
         self.command_state_ns: int | None = None  # driver stamp of the newest law command's
         # state, until its publish is reported
         self.timing = SampleTiming()
+        self.hold = HoldTorque(self.sampling.period)  # the watchdog's torque
         # The adaptive law's model of its input, and the delay it used at its last step.
         self._input_timing = getattr(self.law, "input_timing", None)
         self._modelled_delay: float | None = None
@@ -269,6 +266,7 @@ class RobotLoop:
         self.sampler.start()
         self.active, self.faulted, self._restart, self._replan = True, False, True, False
         self._drop_plan(None)
+        self.hold.reset()
 
     def deactivate(self) -> np.ndarray | None:
         """Stop; the last command (gravity hold at the newest position), None without one."""
@@ -291,7 +289,7 @@ class RobotLoop:
         self.echo.reset()
         self.count("watchdog")
         self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
-        return Step(command=self._hold_command())
+        return Step(command=self._hold_command(learned=True))
 
     def command_published(self, now_ns: int) -> None:
         """The node published the step's command at ``now``: the state-to-command time of the
@@ -467,6 +465,7 @@ class RobotLoop:
             return Step(sample=sample, setpoint=setpoint)  # no command, the last one stands
         row = self.command(setpoint.u_n + out.du)
         self._sent = (k, self.command.to_model(row))
+        self.hold.sent(self._sent[1], self.gravity(sample.position))
         self.count("commands")
         if out.skipped:
             self.count("rls_skipped_updates")
@@ -593,8 +592,9 @@ class RobotLoop:
             "adaptive law restarts its identification from Eq. 33",
         )
 
-    def _hold_command(self) -> np.ndarray | None:
+    def _hold_command(self, learned: bool = False) -> np.ndarray | None:
         newest = self.sampler.newest
         if newest is None or newest.position is None:
             return None
-        return self.command(self.gravity(newest.position))
+        gravity = self.gravity(newest.position)
+        return self.command(self.hold.torque(gravity) if learned else gravity)
