@@ -491,21 +491,9 @@ def test_a_1khz_driver_that_misses_cycles_keeps_its_differenced_velocity_and_the
     missed one counted as evidence, each miss made the velocity the arm's and then a difference
     again: 107 restarts of the identification in the run, 1.22 deg (on wall time the same cell
     was lost in 2 runs of 3 without the supervisor)."""
-    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+    from support.panda import physical_panda_move
 
-    panda = arm_scenario("panda", "c")
-    run = run_robot_loop(
-        2.5,
-        goal_deg=panda.q_goal_deg,
-        driver_ms=1.0,
-        phase_ms=0.37,
-        transport_ms=0.3,
-        payload_kg=panda.payload_kg,
-        effects=ARM_EFFECTS["panda"](),
-        arm=panda,
-        armature=controller_armature("panda", "physical"),
-        missed=0.03,
-    )
+    run = physical_panda_move(2.5, 1.0, missed=0.03)
     assert run.counts["velocity_kind_changes"] == 1
     assert run.max_tracking_error_deg() < 0.6
 
@@ -515,21 +503,9 @@ def test_a_driver_that_stalls_mid_move_keeps_its_differenced_velocity():
     of the machine: on wall time one such run was lost): the drive is the same after it, so
     the law is not restarted (one velocity-kind change in the run, 2.9 deg). When a gap longer
     than max_age forgot the difference, the law restarted twice after it: 9.6 deg."""
-    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+    from support.panda import physical_panda_move
 
-    panda = arm_scenario("panda", "c")
-    run = run_robot_loop(
-        2.5,
-        goal_deg=panda.q_goal_deg,
-        driver_ms=4.0,
-        phase_ms=1.48,
-        transport_ms=0.3,
-        payload_kg=panda.payload_kg,
-        effects=ARM_EFFECTS["panda"](),
-        arm=panda,
-        armature=controller_armature("panda", "physical"),
-        pause=(0.5, 0.525),
-    )
+    run = physical_panda_move(2.5, 4.0, pause=(0.5, 0.525))
     assert run.counts["velocity_kind_changes"] == 1
     assert run.max_tracking_error_deg() < 4.0
 
@@ -541,22 +517,10 @@ def test_the_physical_panda_holds_through_a_stall_after_its_move(stall_s):
     hold carries the payload and the friction the law learnt, and the law takes the arm back
     where it is (0.47 deg; with the model's gravity alone the wrist dropped, 6.7-20.5 deg and a
     hand-over)."""
-    from apc_feedback.supervisor import SupervisorConfig
-    from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+    from support.panda import physical_panda_move
 
-    panda = arm_scenario("panda", "c")
-    run = run_robot_loop(
-        3.0,
-        goal_deg=panda.q_goal_deg,
-        driver_ms=4.0,
-        phase_ms=1.48,
-        transport_ms=0.3,
-        payload_kg=panda.payload_kg,
-        effects=ARM_EFFECTS["panda"](),
-        arm=panda,
-        armature=controller_armature("panda", "physical"),
-        pause=(1.6, 1.6 + stall_s),
-        supervisor=SupervisorConfig(),
-    )
+    from apc_feedback.supervisor import SupervisorConfig
+
+    run = physical_panda_move(3.0, 4.0, pause=(1.6, 1.6 + stall_s), supervisor=SupervisorConfig())
     assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
     assert run.max_tracking_error_deg() < 1.0

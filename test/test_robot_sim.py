@@ -7,6 +7,7 @@ effort ``forward_command_controller`` takes them.
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 import time
@@ -197,26 +198,29 @@ def _spin_until_quiet(graph, peer, quiet_s: float = 0.3) -> None:
         count = len(peer.clock)
 
 
-def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph, tmp_path):
-    """500 Hz driver, controllers at 100 Hz: each command moves time by five 2 ms cycles."""
-    peer = Peer(graph)
-    # sim_wait_s 30: the driver never steps on without a command while the test runs, so what
-    # is asserted does not depend on how fast this machine delivers the /clock messages.
-    with robot_sim(
-        tmp_path,
-        "sim_time:=true",
-        "state_rate:=500.0",
-        "sim_cycles_per_command:=5",
-        "sim_wait_s:=30.0",
-    ) as proc:
+@contextlib.contextmanager
+def _on_the_tick_grid(graph, tmp_path, peer, *extra):
+    """A 500 Hz driver in sim time answered every five cycles (controllers at 100 Hz), its first
+    command taken and time at the controllers' tick grid (a multiple of five cycles), where it
+    waits. sim_wait_s 30: the driver never steps on without a command while the test runs, so
+    what is asserted does not depend on how fast this machine delivers the /clock messages."""
+    args = ("sim_time:=true", "state_rate:=500.0", "sim_cycles_per_command:=5", "sim_wait_s:=30.0")
+    with robot_sim(tmp_path, *args, *extra) as proc:
         graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
         assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
         graph.spin_until(lambda: peer.clock, 10, "/clock")
-        # The first command moves time to the next multiple of five cycles (the controllers'
-        # tick grid), where it waits; every later one by five cycles exactly.
         peer.command([0.0, 10.0, 0.0])
         graph.spin_until(lambda: max(peer.clock) % 10_000_000 == 0, 10, "the tick grid")
         _spin_until_quiet(graph, peer)
+        yield proc
+
+
+def test_sim_time_driver_faster_than_its_controllers_waits_every_n_cycles(graph, tmp_path):
+    """500 Hz driver, controllers at 100 Hz: the first command moves time to the next multiple
+    of five cycles (the controllers' tick grid), where it waits; every later one by five 2 ms
+    cycles exactly."""
+    peer = Peer(graph)
+    with _on_the_tick_grid(graph, tmp_path, peer):
         for _ in range(10):
             before = max(peer.clock)
             peer.command([0.0, 10.0, 0.0])
@@ -232,19 +236,7 @@ def test_sim_time_missed_states(graph, tmp_path):
     (counted as ``unpublished_cycles``) while time goes on; the cycle the driver waits on
     (every fifth) always publishes, so each command is answered as before."""
     peer = Peer(graph)
-    with robot_sim(
-        tmp_path,
-        "sim_time:=true",
-        "state_rate:=500.0",
-        "sim_cycles_per_command:=5",
-        "sim_wait_s:=30.0",
-        "missed_states:=0.5",
-    ) as proc:
-        graph.spin_until(lambda: peer.states or proc.poll() is not None, 30, "first state")
-        assert proc.poll() is None, (tmp_path / "robot_sim.err").read_text()
-        peer.command([0.0, 10.0, 0.0])
-        graph.spin_until(lambda: peer.clock and max(peer.clock) % 10_000_000 == 0, 10, "grid")
-        _spin_until_quiet(graph, peer)
+    with _on_the_tick_grid(graph, tmp_path, peer, "missed_states:=0.5"):
         start = max(peer.clock)
         for i in range(1, 21):
             peer.command([0.0, 10.0, 0.0])

@@ -25,3 +25,18 @@ def panda_100hz_move(duration_s: float = 2.5, **options: Any) -> RobotRun:
         "arm": PANDA,
     }
     return run_robot_loop(duration_s, **{**defaults, **options})
+
+
+def physical_panda_move(duration_s: float, driver_ms: float, **options: Any) -> RobotRun:
+    """The move on the Panda in MuJoCo with every effect of ``robot_sim``'s ``effects: panda``
+    (its controllers told what the benchmarks tell them), on a driver of ``driver_ms`` whose
+    cycles are 0.37 of a period after a multiple of T (the offline grid's); ``options`` go to
+    ``run_robot_loop``."""
+    from apc_lab.robot_compare import ARM_EFFECTS, controller_armature
+
+    defaults: dict[str, Any] = {
+        "phase_ms": 0.37 * driver_ms,
+        "effects": ARM_EFFECTS["panda"](),
+        "armature": controller_armature("panda", "physical"),
+    }
+    return panda_100hz_move(duration_s, driver_ms=driver_ms, **{**defaults, **options})
