@@ -492,7 +492,7 @@ def test_diagnostics_show_the_input_change_weight_in_use_and_when_it_is_at_its_c
     """``law.q_input_change``: the weight ``input_ring_limit`` raised, and a limit it could not
     reach (the weight doubled to its cap) said there."""
     from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
-    from apc_feedback.lagged_control import MAX_RING_DOUBLINGS
+    from apc_feedback.lagged_control import input_change_cap
     from apc_feedback.presets import recommended_settings
     from apc_feedback.robot_node import RobotDiagnostics
 
@@ -507,5 +507,5 @@ def test_diagnostics_show_the_input_change_weight_in_use_and_when_it_is_at_its_c
     assert shown() == "0.003"
     law.input_change_weight = 0.384
     assert shown() == "0.384"
-    law.input_change_weight = config.q_input_change * 2.0**MAX_RING_DOUBLINGS
+    law.input_change_weight = input_change_cap(config.q_input_change)
     assert shown() == "3146 (at its cap: input_ring_limit out of reach)"

@@ -28,9 +28,9 @@ from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, Feedbac
 from apc_feedback.arrays import all_true
 from apc_feedback.input_timing import InputTiming
 from apc_feedback.lagged_control import (
-    MAX_RING_DOUBLINGS,
     RING_CHECK_PERIOD_S,
     damped_input_change,
+    input_change_cap,
     input_ringing,
     receding_controller,
     summed_inputs,
@@ -548,7 +548,7 @@ class AdaptiveFeedback(FeedbackLaw):
         limit, lags = config.input_ring_limit, config.input_lags
         if limit <= 0.0 or control is None or lags < 2 or self.input_change_weight <= 0.0:
             return  # nothing to raise
-        weight, cap = self.input_change_weight, config.q_input_change * 2.0**MAX_RING_DOUBLINGS
+        weight, cap = self.input_change_weight, input_change_cap(config.q_input_change)
         if solved:  # this sample's plan: judged at its weight already
             if input_ringing(control, lags, reuse=True) <= limit:
                 return

@@ -49,6 +49,7 @@ from apc_feedback.optimal import RecedingHorizonControl
 
 __all__ = [
     "damped_input_change",
+    "input_change_cap",
     "input_ringing",
     "receding_controller",
     "summed_inputs",
@@ -171,6 +172,12 @@ def input_ringing(control: RecedingHorizonControl, lags: int, reuse: bool = Fals
     np.negative(gains, out=companion[:n])
     companion[n:, :-n] = np.eye((lags - 1) * n)
     return float(np.max(np.abs(np.linalg.eigvals(companion))))
+
+
+def input_change_cap(q_input_change: float) -> float:
+    """The largest weight of the input's change the ring check raises ``q_input_change`` to:
+    :data:`MAX_RING_DOUBLINGS` doublings of it."""
+    return q_input_change * 2.0**MAX_RING_DOUBLINGS
 
 
 def damped_input_change(

@@ -288,7 +288,7 @@ class RobotLoop:
         self.sampler.start()  # the driver may come back on another cycle
         self.echo.reset()
         self.count("watchdog")
-        self.log("error", "watchdog: no fresh joint state; holding against gravity, silent")
+        self.log("error", "watchdog: no fresh joint state; holding against gravity+payload, silent")
         return Step(command=self._hold_command(learned=True))
 
     def command_published(self, now_ns: int) -> None:

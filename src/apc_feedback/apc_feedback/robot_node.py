@@ -92,7 +92,7 @@ from apc_core.nodeutil import (
 from apc_core.params import ConfigError, Param, declare, params_from, subset
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
-from apc_feedback.lagged_control import MAX_RING_DOUBLINGS
+from apc_feedback.lagged_control import input_change_cap
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
@@ -133,8 +133,8 @@ class RobotDiagnostics(Diagnostics):
         if isinstance(self.law, AdaptiveFeedback):
             self.values["law.input_delay_ms"] = f"{self.law.input_timing.delay * 1e3:.2f}"
             self.values["law.input_lags"] = str(self.law.config.input_lags)
-            weight, cap = self.law.input_change_weight, self.law.config.q_input_change
-            capped = weight > 0.0 and weight >= cap * 2.0**MAX_RING_DOUBLINGS
+            weight = self.law.input_change_weight
+            capped = weight > 0.0 and weight >= input_change_cap(self.law.config.q_input_change)
             self.values["law.q_input_change"] = f"{weight:.4g}" + (
                 " (at its cap: input_ring_limit out of reach)" if capped else ""
             )
