@@ -13,8 +13,9 @@ from support.plans import ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
 from apc_feedback.baselines import PD, PdGains
+from apc_feedback.command_map import CommandMap
 from apc_feedback.presets import recommended_settings
-from apc_feedback.robot_loop import CommandMap, RobotLoop
+from apc_feedback.robot_loop import RobotLoop
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import (
     ADAPTIVE,
@@ -354,11 +355,13 @@ def test_late_commands_on_a_slow_driver_lose_the_arm_without_the_supervisor_not_
 
 
 def test_a_move_on_a_slow_driver_is_held_by_the_fallback_with_the_pid_too():
-    """The paper's move on a 200 Hz driver with Eq. 16's model: unsupervised it is lost
-    (930 deg); supervised it stays bounded with either fallback (computed torque 4.6 deg, PID
-    4.9 deg: one or two hand-overs, the first when the error passes error_bound)."""
+    """The paper's move on a 200 Hz driver with Eq. 16's model: unsupervised it leaves the
+    path tolerance (14 deg; the abort's stop, started again 30 times from where the arm was,
+    brought it to rest; held at once, the diverging law lost it, 930 deg); supervised it stays
+    bounded with either fallback (computed torque 4.6 deg, PID 4.9 deg: one or two hand-overs,
+    the first when the error passes error_bound)."""
     slow = dict(goal_deg=GOAL_DEG, driver_ms=5.0, settings=EQ16)
-    assert run_robot_loop(2.0, **slow).max_tracking_error_deg() > 90.0
+    assert run_robot_loop(2.0, **slow).max_tracking_error_deg() > 10.0
     for fallback, bound in (("computed_torque", 8.0), ("pid", 9.0)):
         run = run_robot_loop(3.0, supervisor=SupervisorConfig(fallback=fallback), **slow)
         assert run.counts["supervisor.handovers"] >= 1

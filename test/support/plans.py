@@ -20,6 +20,7 @@ class ScriptedPlan:
         self.queued: list[TrajectoryGoal] = []
         self.hold: np.ndarray | None = None
         self.restarts = 0
+        self.stops: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         self.fail = False
 
     def restart(self) -> int:
@@ -28,6 +29,13 @@ class ScriptedPlan:
         self.hold = None
         dropped, self.queued = len(self.queued), []
         return dropped
+
+    def stop(self, k, position, velocity, duration) -> None:
+        """Recorded; the stand-in holds the stop's start (``GoalQueue.stop``'s first set point)
+        in place of what was scripted."""
+        self.stops.append((k, position.copy(), velocity.copy(), duration))
+        self.setpoints.clear()
+        self.hold = position.copy()
 
     def add(self, goal: TrajectoryGoal) -> None:
         if goal.times_s[-1] <= 0.0:

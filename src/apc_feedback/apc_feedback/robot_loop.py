@@ -24,7 +24,10 @@ reports when a command went out (:meth:`RobotLoop.command_published`). Goals com
 :meth:`RobotLoop.add_goal` and start when the motion before them ends.
 
 Starts. At activation, after a watchdog fault and after a path-tolerance abort, the plan and
-the queued goals are dropped and the sample's measured position is held from that sample on.
+the queued goals are dropped. Activation holds the sample's measured position; a fault or an
+abort, where the arm may be moving, brings it to rest from its measured state over
+``stop_time`` (:meth:`apc_feedforward.goals.GoalQueue.stop`), starting the stop again from
+the arm's state whenever it is more than :data:`STOP_TOLERANCE` off it (``stop_restarts``).
 The law keeps what it identified (the payload is still on the arm; restarted from Eq. 33 on an
 arm still sagging after a watchdog hold it diverged). A start follows a gap in ``k``: no
 identification step spans a change of plan.
@@ -36,10 +39,10 @@ Faults.
   (:class:`~apc_feedback.hold_torque.HoldTorque`: a payload the model does not know), then
   none; a forward_command_controller keeps applying it (a driver with a command timeout
   applies its own policy). No loop is closed on a stale state; a fresh state restarts the
-  loop at the position measured then.
+  loop at the state measured then, bringing the arm to rest from it.
 - Path tolerance (``|q - q_d| > tolerance`` on a joint while the set point moves, like
   joint_trajectory_controller's ``constraints.<joint>.trajectory``): the goal is aborted and
-  the measured position held (a start).
+  the arm brought to rest (a start); the stop is no goal and has no path tolerance.
 - Supervision (with a ``supervisor`` and a ``fallback`` law): when a trigger of
   :mod:`apc_feedback.supervisor` fires the fallback commands from that sample on, the law is
   reset and idle, and it takes the joints again (from Eq. 33) once the error has settled. A
@@ -58,7 +61,7 @@ the samples' velocity as the states show it (docs/robot.md, "A robot's clock").
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -67,6 +70,7 @@ import numpy as np
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.arrays import all_true, any_true
 from apc_feedback.command_echo import CommandEcho
+from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
 from apc_feedback.linearize import stencil_lags
@@ -76,56 +80,14 @@ from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
 from apc_feedforward.nominal import Setpoint
 from apc_msgs_py import JointSample, TrajectoryGoal
 
-
-class CommandMap:
-    """Model-order torques -> one ``Float64MultiArray`` row in ``command_joints`` order, clipped.
-
-    Parameters
-    ----------
-    model_joints : sequence of str
-        The model's joint order (every array in apc).
-    command_joints : sequence of str
-        The command's order (the forward_command_controller's ``joints``): the same joints.
-    effort_limit : (n,) array
-        Per-joint bound in model order (the URDF's ``<limit effort>``).
-    count : callable
-        ``count("clipped.<joint>")`` for each joint clipped.
-    """
-
-    def __init__(
-        self,
-        model_joints: Sequence[str],
-        command_joints: Sequence[str],
-        effort_limit: np.ndarray,
-        count: Callable[[str], object] = lambda name: None,
-    ) -> None:
-        model, command = list(model_joints), list(command_joints)
-        if sorted(model) != sorted(command) or len(set(command)) != len(command):
-            raise ValueError(
-                f"command_joints must list the model's joints {model} once each, got {command}"
-            )
-        self.model_joints = tuple(model)
-        self.joints = tuple(command)
-        self.order = np.array([model.index(name) for name in command])
-        self.limit = np.asarray(effort_limit, dtype=float)[self.order]
-        self._clipped = tuple(f"clipped.{name}" for name in command)
-        self._count = count
-
-    def __call__(self, torque: np.ndarray) -> np.ndarray:
-        """The command row (a new array), each joint clipped counted."""
-        row = torque[self.order]
-        over = np.abs(row) > self.limit
-        if any_true(over):
-            for i in np.flatnonzero(over):
-                self._count(self._clipped[i])
-            np.clip(row, -self.limit, self.limit, out=row)
-        return row
-
-    def to_model(self, row: np.ndarray) -> np.ndarray:
-        """A command row back in model order."""
-        torque = np.empty_like(row)
-        torque[self.order] = row
-        return torque
+#: How long a start after a fault or an abort takes to bring the arm to rest (s): at most
+#: 7.5 |qd| rad/s^2 of deceleration (docs/robot.md, "A stall in a move").
+STOP_TIME_S = 0.2
+#: A stop whose set point is further than this from the arm on some joint (rad) starts again
+#: from the arm's state at that sample: an arm that cannot decelerate as planned (at its effort
+#: limits, or spinning faster than the stop assumed) is not pulled back to where it could not
+#: stop; held to the first stop, the physical Panda was lost after 5 of 9 stalls of 0.3 s.
+STOP_TOLERANCE = 0.05
 
 
 class Step(NamedTuple):
@@ -174,6 +136,9 @@ class RobotLoop:
         :mod:`apc_feedback.supervisor`); None: ``law`` always does.
     fallback : FeedbackLaw, optional
         The law that holds the arm when the supervisor trips (with ``supervisor`` only).
+    stop_time : float
+        A start after a fault or an abort brings the arm to rest from its measured state over
+        this (s); 0 holds the measured position at once.
     """
 
     law: FeedbackLaw
@@ -186,8 +151,11 @@ class RobotLoop:
     log: Callable[[str, str], object] = field(default=lambda level, text: None)
     supervisor: Supervisor | None = None
     fallback: FeedbackLaw | None = None
+    stop_time: float = STOP_TIME_S
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.stop_time < float("inf"):
+            raise ValueError(f"stop_time must be finite and >= 0 s, got {self.stop_time}")
         if (self.supervisor is None) != (self.fallback is None):
             raise ValueError("a supervisor needs a fallback law and a fallback a supervisor")
         self._limit = self.command.to_model(self.command.limit)
@@ -197,6 +165,7 @@ class RobotLoop:
         self.faulted = False  # watchdog: silent until a fresh state
         self._restart = False  # the next sample taken is a start
         self._replan = False  # and drops the plan (a fault, an abort; activation drops it then)
+        self._stop_end_k = 0  # the sample a stop ends at: no goal, no path tolerance before it
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self.command_state_ns: int | None = None  # driver stamp of the newest law command's
         # state, until its publish is reported
@@ -233,19 +202,27 @@ class RobotLoop:
         if self.faulted:
             self.faulted, self._restart, self._replan = False, True, True
             self.count("watchdog_recovered")
-            self.log("warn", f"sample {take.k}: joint states back; holding the measured position")
+            self.log("warn", f"sample {take.k}: joint states back; bringing the arm to rest")
         if self._restart:
             if sampler.driver_period_ns <= 0:
                 # The start tells the law and the fallback the driver's period (the delay a
                 # command meets): it waits for the second state, which gives the period.
                 self.count("start_waits_for_driver_period")
                 return NOTHING
-            self._start(take.k)
+            self._start(take.k, sample)
         elif sampler.velocity_kind != self._velocity_kind or self._delay_moved():
             self._follow_driver(take.k)
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
             return Step(sample=sample)
+        if take.k < self._stop_end_k and any_true(
+            np.abs(sample.position - setpoint.q) > STOP_TOLERANCE
+        ):
+            self._stop(take.k, sample)  # the arm could not follow the stop: from where it is
+            self.count("stop_restarts")
+            setpoint = self._setpoint(take.k, sample.position)
+            if setpoint is None:
+                return Step(sample=sample)
         step = self._law_step(sample, setpoint)
         if step.command is not None:
             self.command_state_ns = take.state_ns
@@ -299,9 +276,9 @@ class RobotLoop:
             self.command_state_ns = None
 
     # -- the loop -------------------------------------------------------------------------------
-    def _start(self, k: int) -> None:
-        """Sample ``k`` is a start: the plan and the queued goals are dropped, and the measured
-        position is held from ``k`` on.
+    def _start(self, k: int, sample: JointSample) -> None:
+        """Sample ``k`` is a start: the plan and the queued goals are dropped; after a fault or
+        an abort the arm is brought to rest from the ``sample``'s state (``stop_time``).
 
         A law that models its input's delay (``AdaptiveFeedback`` with ``input_lags``) is told
         the delay it splits ``Ĝ(0)`` by at its next (re)start: the delay the driver's effort
@@ -322,8 +299,16 @@ class RobotLoop:
             self.supervisor.expect_command_delay(driver_period)
         if self._replan:
             self._drop_plan(k)
+            if self.stop_time > 0.0:
+                self._stop(k, sample)
         self._restart = self._replan = False
         self.count("starts")
+
+    def _stop(self, k: int, sample: JointSample) -> None:
+        """Bring the arm to rest from the ``sample``'s state, from sample ``k`` on."""
+        assert sample.position is not None and sample.velocity is not None
+        self.plan.stop(k, sample.position, sample.velocity, self.stop_time)
+        self._stop_end_k = k + round(self.stop_time / self.sampling.period)
 
     def _tell_law(self) -> None:
         """Tell a law that models its samples' timing what robot mode knows of the driver now:
@@ -428,14 +413,15 @@ class RobotLoop:
         assert sample.position is not None and sample.velocity is not None
         error = np.abs(sample.position - setpoint.q)
         tolerance = self.path_tolerance
-        if any_true(setpoint.qd != 0.0) and any_true((tolerance > 0.0) & (error > tolerance)):
+        moving = setpoint.k >= self._stop_end_k and any_true(setpoint.qd != 0.0)
+        if moving and any_true((tolerance > 0.0) & (error > tolerance)):
             j = int(np.argmax(np.where(tolerance > 0.0, error - tolerance, -np.inf)))
             self.count("path_tolerance_aborts")
             self.log(
                 "error",
                 f"sample {setpoint.k}: tracking error {error[j]:.4g} rad "
                 f"on joint {self.command.model_joints[j]!r} beyond its path tolerance "
-                f"{tolerance[j]:.4g} rad; goal aborted, holding the measured position",
+                f"{tolerance[j]:.4g} rad; goal aborted, bringing the arm to rest",
             )
             # The next sample is the start: this one gets no command (the last one stands), so
             # the law sees a gap and takes no identification step across the change of plan.

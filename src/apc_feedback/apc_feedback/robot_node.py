@@ -32,9 +32,10 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
 
 Faults (counted and on ``/diagnostics``): no fresh joint state within ``watchdog`` (checked
 every T by a timer on the node clock, which honours ``use_sim_time``) -> the gravity hold
-once, then silence until states return (then a fresh hold at the measured position, the phase
-locked afresh); tracking error beyond ``path_tolerance`` while a goal moves -> the goal is
-aborted and the measured position held. See :mod:`apc_feedback.robot_loop` for why.
+once, then silence until states return (then the arm brought to rest from its measured state
+over ``stop_time``, the phase locked afresh); tracking error beyond ``path_tolerance`` while a
+goal moves -> the goal is aborted and the arm brought to rest the same way. See
+:mod:`apc_feedback.robot_loop` for why.
 
 Timing on ``/diagnostics`` (median, p99 and max over the last 1000 samples, in us):
 ``state_age_*`` (a state's age when its callback runs), ``state_to_command_*`` (its stamp to
@@ -91,11 +92,12 @@ from apc_core.nodeutil import (
 )
 from apc_core.params import ConfigError, Param, declare, params_from, subset
 from apc_feedback.command_echo import CommandEcho
+from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
 from apc_feedback.lagged_control import input_change_cap
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
-from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
+from apc_feedback.robot_loop import STOP_TIME_S, RobotLoop, Step
 from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
@@ -165,7 +167,15 @@ PARAMS: tuple[Param, ...] = (
         "path_tolerance",
         [],
         "largest |q - q_d| (rad) while a goal moves, one per joint or one for all; beyond it "
-        "the goal is aborted and the measured position held; empty or 0 = no check",
+        "the goal is aborted and the arm brought to rest; empty or 0 = no check",
+    ),
+    Param(
+        "stop_time",
+        STOP_TIME_S,
+        "after a watchdog fault or a path-tolerance abort the arm is brought to rest from its "
+        "measured state over this (s); 0 = hold the measured position at once",
+        0.0,
+        10.0,
     ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
@@ -248,6 +258,7 @@ class RobotNode(LifecycleNode):
             plan=GoalQueue.from_params(robot, values),
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=path_tolerance,
+            stop_time=values["stop_time"],
             count=diag.count,
             log=level_logger(self),
             **supervision,

@@ -256,6 +256,22 @@ class GoalQueue:
         self._last_q = None
         return dropped
 
+    def stop(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> None:
+        """From sample ``k`` on, bring the arm to rest from its measured state (robot mode's
+        start after a fault or an abort, when the arm may be moving): the set point starts at
+        ``position`` and ``velocity`` and is at rest ``duration`` s later, half the distance
+        the velocity would cover on (a quintic whose velocity falls monotonically, at most
+        1.5 |velocity| / duration rad/s^2), within the URDF's limits; held there after. A
+        set point that holds ``position`` instead asks a moving arm to stop at once: from the
+        speed a stall leaves it at, it overshoots by tens of degrees (docs/robot.md). Call
+        after :meth:`restart`."""
+        rest = position + 0.5 * duration * velocity
+        lower, upper = self.position_limits
+        if lower.shape == rest.shape and upper.shape == rest.shape:
+            rest = np.clip(rest, np.minimum(lower, position), np.maximum(upper, position))
+        plan = Quintic(position, rest, duration, qd0=velocity)
+        self.feedforward = Feedforward(self.model, plan, self.period, k)
+
     def rejoin(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> bool:
         """Rejoin the plan from the measured state at sample ``k`` (robot mode's hand-back from
         a fallback): from ``k`` on the set point starts at ``position`` and ``velocity`` and

@@ -237,6 +237,39 @@ def test_a_restart_drops_plan_and_goals_and_holds_the_position_measured_then(rob
     assert fresh.first_goal is not None
 
 
+def test_a_stop_brings_a_moving_arm_to_rest_within_its_deceleration(robot):
+    """Robot mode's start after a fault: from the measured state the set point slows
+    monotonically to rest ``duration`` later, half the distance the velocity would cover on,
+    at most 1.5 |v| / duration rad/s^2; then it holds there."""
+    q = queue(robot, first_goal=Q0 + 0.2)
+    q.sample(0, Q0, keep)
+    q.restart()
+    velocity = np.array([1.5, -0.8, 0.0])
+    q.stop(30, Q0, velocity, 0.2)
+    points = [q.sample(k, Q0 + 1.0, keep).setpoint for k in range(30, 55)]
+    assert_array_equal(points[0].q, Q0)
+    np.testing.assert_allclose(points[0].qd, velocity, atol=1e-12)
+    rest = Q0 + 0.1 * velocity
+    np.testing.assert_allclose(points[20].q, rest, atol=1e-12)
+    assert_array_equal(points[20].qd, np.zeros(3))
+    assert_array_equal(points[-1].q, points[20].q)
+    speeds = np.abs([p.qd for p in points])
+    assert np.all(np.diff(speeds, axis=0) <= 1e-12)  # never speeds up, never reverses
+    assert np.max(np.abs([p.qdd for p in points]), axis=0) == pytest.approx(
+        1.5 * np.abs(velocity) / 0.2, rel=0.01
+    )
+
+
+def test_a_stop_rests_inside_the_joint_limits(robot):
+    lower, upper = robot.position_limits
+    q = queue(robot)
+    start = upper - 0.01
+    q.stop(0, start, np.full(3, 2.0), 0.2)
+    q_rest = q.sample(40, start, keep).setpoint.q
+    assert np.all(q_rest <= upper) and np.all(q_rest > start)
+    assert np.all(lower <= q_rest)
+
+
 def test_a_hold_is_rejoined_from_where_the_arm_is(robot):
     """Robot mode's hand-back from a fallback during a hold: the set point starts where the arm
     sagged to and reaches the hold at rest after ``duration``."""

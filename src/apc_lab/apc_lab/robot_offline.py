@@ -29,9 +29,10 @@ import numpy as np
 import pinocchio as pin
 
 from apc_core.robot import Payload, load_robot, with_armature, with_inertia_error
+from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
-from apc_feedback.robot_loop import CommandMap, RobotLoop, Step
+from apc_feedback.robot_loop import RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, fallback_law
 from apc_feedforward.four_three_four import FourThreeFour
