@@ -57,6 +57,16 @@ class CommandEcho:
         """The longest of the delays kept, once :attr:`delay_ns` is measured (else None)."""
         return max(self._delays) if self.delay_ns is not None else None
 
+    def steady(self, driver_period_ns: int) -> bool:
+        """Whether :data:`ECHOES` delays are kept and every one is within half a driver period
+        of the measured delay: a drive whose timing does not jitter."""
+        delays = self._delays
+        return (
+            len(delays) == ECHOES
+            and self.delay_ns is not None
+            and 2 * (max(delays) - self.delay_ns) <= driver_period_ns
+        )
+
     def reset(self) -> None:
         """Forget the delays (the driver may have changed: a gap in its states)."""
         self._pending.clear()

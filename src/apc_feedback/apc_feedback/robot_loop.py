@@ -19,7 +19,7 @@ One sample ``k``:
    (the paper's structure); the sum happens where both are.
 
 :meth:`RobotLoop.tick`, called by a timer, is only the watchdog below. The loop keeps the
-sampling's timing (:class:`~apc_feedback.robot_sampling.SampleTiming`, ``timing``); the node
+sampling's timing (:class:`~apc_feedback.sample_timing.SampleTiming`, ``timing``); the node
 reports when a command went out (:meth:`RobotLoop.command_published`). Goals come in through
 :meth:`RobotLoop.add_goal` and start when the motion before them ends.
 
@@ -74,7 +74,8 @@ from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
 from apc_feedback.linearize import stencil_lags
-from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, SampleTiming
+from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
+from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
 from apc_feedforward.nominal import Setpoint
@@ -334,15 +335,24 @@ class RobotLoop:
         closed-loop data fills with a channel the plan leans on), or every kept delay at most
         half a driver period (applied over its state's own cycle: a lockstep simulator, where
         Eq. 16 holds as it stands and the driver period the law would assume is a whole sample
-        too late on a slow driver), within the lags the law can carry with the samples'
-        velocity; else None (the law assumes a driver period and scores two). docs/robot.md,
-        "When the arm applies a command"."""
+        too late on a slow driver), or a steady delay (:meth:`CommandEcho.steady`) where the
+        samples' velocity is the arm's own (the states have shown it
+        is no difference of positions: the delay's split is then the exact model of the
+        sample; assumed, with the drive's extra cycle at 250 Hz, the law lost the Panda in
+        every run), within the lags the law can carry with the samples' velocity;
+        else None (the law assumes a driver period and scores two). docs/robot.md, "When the
+        arm applies a command"."""
         measured, longest = self.echo.delay_ns, self.echo.longest_ns
         if measured is None or longest is None:
             return None
-        if measured < self.period_ns and 2 * longest > self.sampler.driver_period_ns:
+        sampler, period = self.sampler, self.sampler.driver_period_ns
+        if (
+            measured < self.period_ns
+            and 2 * longest > period
+            and not (self.echo.steady(period) and sampler.velocity_is_the_arms())
+        ):
             return None
-        stencil = self.sampler.velocity_stencil()
+        stencil = sampler.velocity_stencil()
         needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)
         return measured if needed <= MAX_INPUT_LAGS else None
 

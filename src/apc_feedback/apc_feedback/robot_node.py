@@ -41,7 +41,7 @@ Timing on ``/diagnostics`` (median, p99 and max over the last 1000 samples, in u
 ``state_age_*`` (a state's age when its callback runs), ``state_to_command_*`` (its stamp to
 its command's publish), ``sample_phase_*``, ``carry_*`` (how far states are carried to their
 sample's time) and ``driver_period_*`` (estimated from the stamps); see
-:class:`apc_feedback.robot_sampling.SampleTiming`.
+:class:`apc_feedback.sample_timing.SampleTiming`.
 
 The adaptive law is supervised (``supervisor.*``, :mod:`apc_feedback.supervisor`): when it goes
 wrong a fallback law (computed torque by default) commands until the error settles, and every
@@ -102,9 +102,9 @@ from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
-    SampleTiming,
     StateRejectedError,
 )
+from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, SupervisorError, fallback_law
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, setpoint_message
 

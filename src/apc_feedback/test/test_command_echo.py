@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from apc_feedback.command_echo import MIN_ECHOES, CommandEcho
+from apc_feedback.command_echo import ECHOES, MIN_ECHOES, CommandEcho
 
 MS = 1_000_000
 
@@ -33,6 +33,23 @@ def test_the_delay_is_one_driver_period_or_one_more_per_cycle_the_drive_adds():
         echo = CommandEcho()
         _drive(echo, period_ms, late, every)
         assert echo.delay_ns == round((1 + late) * period_ms * MS)
+        assert echo.steady(round(period_ms * MS))  # every echo the same
+
+
+def test_a_delay_is_steady_once_a_full_window_agrees_within_half_a_period():
+    P = 4 * MS
+    echo = CommandEcho()
+    assert not echo.steady(P)
+    echo.observe(0, np.zeros(2), P)  # the effort before the first command
+    for i in range(ECHOES):
+        command = np.full(2, float(i + 1))
+        echo.sent(i * 10 * P, command)
+        echo.observe(i * 10 * P + 3 * P, command, P)  # 2 P after its state
+        assert echo.steady(P) == (i + 1 == ECHOES)  # not on the first few: a window's worth
+    command = np.full(2, 99.0)
+    echo.sent(100 * P, command)
+    echo.observe(100 * P + 4 * P, command, P)  # one command a cycle late: a jittering drive
+    assert echo.delay_ns == 2 * P and not echo.steady(P)
 
 
 def test_a_measured_torque_gives_no_delay_and_a_late_command_adds_none():

@@ -14,11 +14,10 @@ from apc_feedback.robot_sampling import (
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
-    SampleTiming,
     StateRejectedError,
-    TimingWindow,
     VelocityEstimator,
 )
+from apc_feedback.sample_timing import SampleTiming, TimingWindow
 from apc_feedback.sampling import JointStateSampler
 from apc_msgs_py import JointSample
 
@@ -373,14 +372,17 @@ def test_an_arms_own_velocity_is_not_taken_for_a_difference():
     q = np.stack([np.sin(t), 0.5 * t**2, np.cos(2 * t)], axis=1)
     qd = np.stack([np.cos(t), t, -2 * np.sin(2 * t)], axis=1)
     check = DifferenceCheck()
+    assert not check.refuted  # nothing seen: not known to be the arm's either
     for i in range(1, len(t)):
         check.add(q[i] - q[i - 1], qd[i], T)
-    assert check.period_s is None
+    assert check.period_s is None and check.refuted
+    check.reset()  # states gone for the watchdog: the driver may be another
+    assert not check.refuted
     counts = 2.0 * np.pi / 2**16
     quantised = np.round(q / counts) * counts
     for i in range(1, len(t)):
         check.add(quantised[i] - quantised[i - 1], qd[i], T)
-    assert check.period_s is None
+    assert check.period_s is None and check.refuted
 
 
 def test_states_at_rest_say_nothing_and_one_that_disagrees_starts_the_count_again():
@@ -389,16 +391,17 @@ def test_states_at_rest_say_nothing_and_one_that_disagrees_starts_the_count_agai
     for _ in range(DIFFERENCE_STATES):
         check.add(step, step / 0.01, T)
         check.add(np.zeros(2), np.zeros(2), T)  # at rest: no evidence either way
+        assert not check.refuted
     assert check.period_s == pytest.approx(0.01)
     check.add(step, step / 0.01 + np.array([0.0, 1e-3]), T)  # not a difference
-    assert check.period_s is None
+    assert check.period_s is None and check.refuted
     check.add(np.array([1e-4, 0.0]), np.array([1e-2, 1e-3]), T)  # velocity without a change
     assert check.period_s is None
     for _ in range(DIFFERENCE_STATES - 1):
         check.add(step, step / 0.01, T)
-    assert check.period_s is None
+    assert check.period_s is None and check.refuted
     check.add(step, step / 0.01, T)
-    assert check.period_s == pytest.approx(0.01)
+    assert check.period_s == pytest.approx(0.01) and not check.refuted
     check.add(step, step / 0.001, T)  # a difference over a tenth of the states' interval
     assert check.period_s is None
 

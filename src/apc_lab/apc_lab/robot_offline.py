@@ -78,7 +78,7 @@ class Latency:
 class RobotRun:
     """One run: the start position; per driver cycle (time ns, q), with the set point's q
     appended for the cycles whose state was a sample; the loop's timing figures at the end
-    (:meth:`apc_feedback.robot_sampling.SampleTiming.figures`, us), its counters and its logged
+    (:meth:`apc_feedback.sample_timing.SampleTiming.figures`, us), its counters and its logged
     lines ``(level, text)``."""
 
     q0: np.ndarray
