@@ -50,6 +50,8 @@ on at 500 Hz, one run per law (~25 s).
     .venv/bin/python bench/robot_clock.py --quick
     .venv/bin/python bench/robot_clock.py --arms puma3 --effects ideal --rates 100 1000 --runs 1
     .venv/bin/python bench/robot_clock.py --quick --logs LOGDIR --json OUT.json --md OUT.md
+    .venv/bin/python bench/robot_clock.py --arms panda --effects physical --rates 250 \
+        --velocity-source exact --no-write      # a drive that measures the arm's velocity
 """
 
 from __future__ import annotations
@@ -118,11 +120,13 @@ class RunSpec:
     law: str
     index: int
     phase_s: float
+    velocity_source: str = ""  # a physical arm's drive velocity, if not its preset's
 
     @property
     def tag(self) -> str:
         law = self.law.replace(" ", "_")
-        return f"{self.arm}_{self.effects}_{self.rate_hz:g}_{law}_{self.index}"
+        velocity = f"_{self.velocity_source}" if self.velocity_source else ""
+        return f"{self.arm}_{self.effects}{velocity}_{self.rate_hz:g}_{law}_{self.index}"
 
 
 class Observer:
@@ -227,7 +231,11 @@ class WallRun:
         s = self.spec
         sim_file = self.workdir / f"{s.tag}.robot_sim.yaml"
         params = {
-            "robot_sim": {"ros__parameters": robot_sim_parameters(s.arm, s.effects, s.rate_hz)}
+            "robot_sim": {
+                "ros__parameters": robot_sim_parameters(
+                    s.arm, s.effects, s.rate_hz, s.velocity_source
+                )
+            }
         }
         sim_file.write_text(yaml.safe_dump(params, sort_keys=False))
         self._spawn(
@@ -391,8 +399,10 @@ def run(
     runs: int | None = None,
     seed: int = 0,
     logs: Path | None = None,
+    velocity_source: str = "",
 ) -> dict[str, Any]:
     """Every cell (``quick``: :data:`QUICK`'s), ``runs`` runs each; {"robot_clock": result}.
+    ``velocity_source``: the physical arms' drive velocity instead of their preset's.
     Node logs and parameter files go to ``logs`` (kept) or a temporary directory."""
     benchlib.isolate_dds()
     base: dict[str, Any] = QUICK if quick else {
@@ -420,6 +430,7 @@ def run(
             "-p robot_node:autostart:=false -p robot_node:controller:=<law> "
             f"-p robot_node:path_tolerance:={PATH_TOLERANCE} (adaptive: the file's adaptive.* "
             "overrides put back to the preset's values)",
+            "physical arms' velocity": velocity_source or "the preset's",
             "run": f"configure, activate at a random phase of the driver's cycle, hold "
             f"{HOLD_BEFORE_S:g} s, case (c) goal, hold {HOLD_AFTER_S:g} s",
         },
@@ -431,14 +442,17 @@ def run(
         for arm, eff, rate, law in plan(arms, effects, rates, laws):
             cell_runs = []
             for i in range(runs):
-                spec = RunSpec(arm, eff, rate, law, i, rng.uniform(0.0, 1.0 / rate))
+                phase = rng.uniform(0.0, 1.0 / rate)
+                spec = RunSpec(arm, eff, rate, law, i, phase, velocity_source)
                 r = run_one(workdir, spec)
                 benchlib.progress(_progress_line(spec, runs, r))
                 cell_runs.append(r)
             result["cells"].append(
                 {
                     "arm": arm,
-                    "effects": eff,
+                    "effects": eff
+                    if not velocity_source or eff == "ideal"
+                    else f"{eff}, {velocity_source} velocity",
                     "rate_hz": rate,
                     "law": law,
                     "summary": aggregate_cell(cell_runs),
@@ -463,6 +477,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--logs", type=Path, help="keep the node logs in this directory")
     parser.add_argument("--json", type=Path, default=RESULTS_JSON, help="where the JSON goes")
     parser.add_argument("--md", type=Path, default=RESULTS_MD, help="where the table goes")
+    parser.add_argument(
+        "--velocity-source",
+        choices=("exact", "noisy", "difference"),
+        default="",
+        help="the physical arms' drive velocity (robot_sim's velocity_source) instead of the "
+        "preset's difference: exact for a drive that measures the arm's",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
     out = run(
@@ -474,6 +495,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs=args.runs,
         seed=args.seed,
         logs=args.logs,
+        velocity_source=args.velocity_source,
     )["robot_clock"]
     text = markdown(out)
     print(text)

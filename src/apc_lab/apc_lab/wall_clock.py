@@ -292,12 +292,16 @@ def controller_arguments(arm: str, law: str, effects: str) -> list[str]:
     return args
 
 
-def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, Any]:
+def robot_sim_parameters(
+    arm: str, effects: str, rate_hz: float, velocity_source: str = ""
+) -> dict[str, Any]:
     """robot_sim's parameters: robot_compare's case (c) for the arm on wall time at ``rate_hz``.
 
     The ideal arm publishes positions only, as a joint_state_broadcaster over hardware without
     a velocity state interface (the issue's driver, and the offline grid's ideal arm,
-    ``bench/robot_clock_offline.py``); the physical presets publish their drive's velocity.
+    ``bench/robot_clock_offline.py``); the physical presets publish their drive's velocity,
+    the preset's (a difference of the encoder's positions) or ``velocity_source``'s (robot_sim's
+    parameter: ``exact`` for a drive that measures the arm's).
     """
     from apc_lab import robot_compare as rc
 
@@ -311,4 +315,6 @@ def robot_sim_parameters(arm: str, effects: str, rate_hz: float) -> dict[str, An
         sim_cycles_per_command=round(rate_hz * period),
         publish_velocity=effects != "ideal",
     )
+    if velocity_source and effects != "ideal":
+        params["velocity_source"] = velocity_source
     return params

@@ -243,6 +243,12 @@ def test_robot_sim_runs_case_c_on_wall_time_at_the_cells_rate():
     assert panda["sim_cycles_per_command"] == 10
     # the ideal arm's driver publishes positions only, as the offline grid's; a drive its own
     assert panda["publish_velocity"] is False and puma["publish_velocity"] is True
+    # a physical arm's drive velocity on request (one that measures it); the ideal arm's none
+    assert "velocity_source" not in puma
+    measured = wall_clock.robot_sim_parameters("panda", "physical", 250.0, "exact")
+    assert measured["velocity_source"] == "exact" and measured["effects"] == "panda"
+    ideal = wall_clock.robot_sim_parameters("panda", "ideal", 250.0, "exact")
+    assert "velocity_source" not in ideal and ideal["publish_velocity"] is False
 
 
 def test_a_missed_sample_at_the_moves_end_leaves_the_final_error_at_the_one_before():
