@@ -487,6 +487,22 @@ def test_a_lockstep_driver_that_sometimes_applies_a_cycle_late_is_not_told_zero(
     assert told == [(T, False)] and counts["measured_delay_changes"] == 0
 
 
+def test_a_fractional_delay_told_stays_told_through_a_late_command():
+    """The arm's velocity, a 250 Hz driver whose drive adds a cycle (8 ms, told once a window
+    of echoes agrees), one command a cycle later still: the window is no longer steady, but the
+    delay it measures is the one told, so the law is not restarted on the driver period and
+    again on 8 ms (on wall time such commands come now and then)."""
+    loop, counts, _ = _loop(before=None)
+    loop.law = law = _StencilPD()
+    loop.activate()
+    loop.sampler.velocity_is_the_arms = lambda: True
+    period = round(4.0 * MS)
+    told = _echoing(loop, law, lambda i: 2 if i == 60 else 1, 120, period)
+    assert not loop.echo.steady(period) or loop.echo.longest_ns == 2 * period
+    assert told == [(period, False), (2 * period, True)]
+    assert counts["measured_delay_changes"] == 1 and law.restarts == 1
+
+
 def test_a_told_delay_no_longer_measured_returns_the_law_to_the_driver_period():
     """A 250 Hz driver applying commands over their state's own cycle (0 ms, told), then at its
     next write (4 ms, under a sample: not told, the velocity being no arm's): the law restarts

@@ -335,13 +335,14 @@ class RobotLoop:
         closed-loop data fills with a channel the plan leans on), or every kept delay at most
         half a driver period (applied over its state's own cycle: a lockstep simulator, where
         Eq. 16 holds as it stands and the driver period the law would assume is a whole sample
-        too late on a slow driver), or a steady delay (:meth:`CommandEcho.steady`) where the
-        samples' velocity is the arm's own (the states have shown it
-        is no difference of positions: the delay's split is then the exact model of the
-        sample; assumed, with the drive's extra cycle at 250 Hz, the law lost the Panda in
-        every run), within the lags the law can carry with the samples' velocity;
-        else None (the law assumes a driver period and scores two). docs/robot.md, "When the
-        arm applies a command"."""
+        too late on a slow driver), or a steady delay where the samples' velocity is the
+        arm's own (the states have shown it is no difference of positions: the delay's split is
+        then the exact model of the sample; assumed, with the drive's extra cycle at 250 Hz,
+        the law lost the Panda in every run). Steady: a full window of echoes agrees
+        (:meth:`CommandEcho.steady`), and once told the delay stays told while the echo
+        measures it, so that a command late now and then does not restart the law twice. Within
+        the lags the law can carry with the samples' velocity; else None (the law assumes a
+        driver period and scores two). docs/robot.md, "When the arm applies a command"."""
         measured, longest = self.echo.delay_ns, self.echo.longest_ns
         if measured is None or longest is None:
             return None
@@ -349,7 +350,10 @@ class RobotLoop:
         if (
             measured < self.period_ns
             and 2 * longest > period
-            and not (self.echo.steady(period) and sampler.velocity_is_the_arms())
+            and not (
+                sampler.velocity_is_the_arms()
+                and (self.echo.steady(period) or self._told_delay_ns == measured)
+            )
         ):
             return None
         stencil = sampler.velocity_stencil()
