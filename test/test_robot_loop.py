@@ -8,6 +8,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from support.panda import PANDA
 from support.plans import HOLD_U_N, ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
@@ -564,6 +565,18 @@ def test_a_driver_that_stalls_mid_move_keeps_its_differenced_velocity():
     assert run.max_tracking_error_deg() < 4.0
 
 
+def _stalled_panda(start_s: float, stall_s: float, **options):
+    """The physical Panda's move on a 250 Hz driver, supervised as shipped, its states gone
+    from ``start_s`` for ``stall_s`` (s after activation; the move runs from 0.2 to 1.2 s);
+    ``options`` go to ``physical_panda_move``."""
+    from support.panda import physical_panda_move
+
+    from apc_feedback.supervisor import SupervisorConfig
+
+    pause = (start_s, start_s + stall_s)
+    return physical_panda_move(3.0, 4.0, pause=pause, supervisor=SupervisorConfig(), **options)
+
+
 @pytest.mark.parametrize("stall_s", [0.2, 0.3])
 def test_the_physical_panda_holds_through_a_stall_after_its_move(stall_s):
     """The physical Panda on a 250 Hz driver, states gone for 0.2-0.3 s in the hold after the
@@ -571,18 +584,14 @@ def test_the_physical_panda_holds_through_a_stall_after_its_move(stall_s):
     hold carries the payload and the friction the law learnt, and the law takes the arm back
     where it is (0.47 deg; with the model's gravity alone the wrist dropped, 6.7-20.5 deg and a
     hand-over)."""
-    from support.panda import physical_panda_move
-
-    from apc_feedback.supervisor import SupervisorConfig
-
-    run = physical_panda_move(3.0, 4.0, pause=(1.6, 1.6 + stall_s), supervisor=SupervisorConfig())
+    run = _stalled_panda(1.6, stall_s)
     assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
     assert run.max_tracking_error_deg() < 1.0
 
 
 #: The Panda's payload (5 lb) ±1 %: what a physical arm does open-loop in a stall is chaotic in
 #: its inputs (with 2.268 kg for 2.26796 the counterfactual below ends 2.1 deg off, not lost).
-PANDA_PAYLOADS_KG = tuple(f * 2.26796185 for f in (0.99, 1.0, 1.01))
+PANDA_PAYLOADS_KG = tuple(f * PANDA.payload_kg for f in (0.99, 1.0, 1.01))
 
 
 def _stop_time(seconds: float):
@@ -597,24 +606,11 @@ def test_the_physical_panda_is_brought_to_rest_after_a_stall_in_its_move(payload
     rest from the state it finds over stop_time: 1.0-1.4 deg over payloads ±2 %, no hand-over.
     Held at the measured position at once instead (stop_time 0), it overshot by 15-47 deg, and
     3 of those 9 runs were lost (331-725 deg at the end)."""
-    from support.panda import physical_panda_move
-
-    from apc_feedback.supervisor import SupervisorConfig
-
-    def stalled(**options):
-        return physical_panda_move(
-            3.0,
-            4.0,
-            pause=(0.9, 1.0),
-            supervisor=SupervisorConfig(),
-            payload_kg=payload_kg,
-            **options,
-        )
-
-    run = stalled()
+    run = _stalled_panda(0.9, 0.1, payload_kg=payload_kg)
     assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
     assert run.max_tracking_error_deg() < 3.0
-    assert stalled(setup=_stop_time(0.0)).max_tracking_error_deg() > 20.0
+    held = _stalled_panda(0.9, 0.1, payload_kg=payload_kg, setup=_stop_time(0.0))
+    assert held.max_tracking_error_deg() > 20.0
 
 
 def test_the_physical_panda_is_not_lost_to_a_longer_stall_in_its_move():
@@ -622,19 +618,9 @@ def test_the_physical_panda_is_not_lost_to_a_longer_stall_in_its_move():
     slow it, so the stop starts again from where the arm is (0-12 times) and brings it to rest
     (finals 0.5-1.8 deg, payload ±1 %). Held at the measured position at once, these three
     runs were lost (570-1300 deg at the end; 6 of 9 over payloads ±2 %)."""
-    from support.panda import physical_panda_move
-
-    from apc_feedback.supervisor import SupervisorConfig
 
     def stalled(payload_kg, **options):
-        run = physical_panda_move(
-            3.0,
-            4.0,
-            pause=(0.9, 1.1),
-            supervisor=SupervisorConfig(),
-            payload_kg=payload_kg,
-            **options,
-        )
+        run = _stalled_panda(0.9, 0.2, payload_kg=payload_kg, **options)
         return run.tracking_error_deg()[-1].max()
 
     assert max(stalled(payload) for payload in PANDA_PAYLOADS_KG) < 3.0
