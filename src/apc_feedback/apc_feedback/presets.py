@@ -37,7 +37,7 @@ def paper_settings(alpha: float = 1.5e5) -> dict[str, Any]:
 
 def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     """Within the paper's structure, what the measurements recommend (``bench/preset_sweep.py``):
-    the paper's settings (R, rho, P(0)) with these changes.
+    the paper's settings (R, P(0)) with these changes.
 
     Same RLS-identified perturbation model and optimal control of it, same feedforward, with
     changes chosen by measurement on the paper's three cases: a position-weighted Q (Eq. 34
@@ -60,10 +60,16 @@ def recommended_settings(alpha: float = 1.5e5) -> dict[str, Any]:
     law's commands growing while the arm does not answer them: an arm held still by its
     friction, a 100 Hz driver), so that they do not. Why these values and not
     others, measured: docs/paper.md, "The model prior" and the preset sweep; docs/robot.md,
-    "Commands ringing at the Nyquist frequency".
+    "Commands ringing at the Nyquist frequency". ŵ forgets more slowly than the paper's
+    (``rho`` 0.99, a memory of about 100 samples, 1 s at T = 10 ms, against 0.95's 20): with the
+    integral action it would otherwise follow a joint's Coulomb friction as it flips with the
+    velocity, and the two hold a light joint in a limit cycle (the Panda's wrist under its
+    payload: ±0.35 deg at about 1 Hz, finals up to 0.45 deg; with 0.99, 0.02-0.19 deg;
+    docs/robot.md, "Hunting in a hold").
     """
     return {
         **paper_settings(alpha),
+        "rho": 0.99,  # ŵ's memory; 0.95 hunts on friction (docstring)
         "q_position": 2000.0,
         "q_velocity": 1.0,
         "trace_max": 0.0,
