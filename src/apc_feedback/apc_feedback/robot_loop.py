@@ -67,13 +67,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.arrays import all_true, any_true
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import FeedbackLaw, FeedbackOutput
+from apc_feedback.delay_telling import DelayTelling
 from apc_feedback.hold_torque import HoldTorque
-from apc_feedback.linearize import stencil_lags
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
 from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
@@ -176,10 +175,9 @@ class RobotLoop:
         self._input_timing = getattr(self.law, "input_timing", None)
         self._modelled_delay: float | None = None
         self._velocity_kind = ""  # what the samples' velocity was at the last start
-        # When the arm applies a command, from the driver's effort; and the delay the law was
-        # told at the last start (None: not measured then).
+        # When the arm applies a command, from the driver's effort; and the delay the law is told.
         self.echo = CommandEcho()
-        self._told_delay_ns: int | None = None
+        self.delay = DelayTelling(self.echo, self.sampler, self.period_ns)
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
@@ -211,7 +209,7 @@ class RobotLoop:
                 self.count("start_waits_for_driver_period")
                 return NOTHING
             self._start(take.k, sample)
-        elif sampler.velocity_kind != self._velocity_kind or self._delay_moved():
+        elif sampler.velocity_kind != self._velocity_kind or self.delay.moved(take.k):
             self._follow_driver(take.k)
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
@@ -316,7 +314,7 @@ class RobotLoop:
         the delay to the arm applying a command and the samples' velocity (see :meth:`_start`)."""
         sampler = self.sampler
         self._velocity_kind = sampler.velocity_kind
-        self._told_delay_ns = measured = self._measured_delay_ns()
+        measured = self.delay.tell()
         expect = getattr(self.law, "expect_input_delay", None)
         if expect is None:
             return
@@ -328,49 +326,6 @@ class RobotLoop:
             driver_period = sampler.driver_period_ns * 1e-9
             expect(driver_period, (2.0 * driver_period,))
         self.law.expect_velocity_stencil(sampler.velocity_stencil())
-
-    def _measured_delay_ns(self) -> int | None:
-        """The delay the driver's effort shows, where the law is told it: a whole sample or more
-        (the sample's own command cannot act before the next sample, which a split learnt from
-        closed-loop data fills with a channel the plan leans on), or every kept delay at most
-        half a driver period (applied over its state's own cycle: a lockstep simulator, where
-        Eq. 16 holds as it stands and the driver period the law would assume is a whole sample
-        too late on a slow driver), or a steady delay where the samples' velocity is the
-        arm's own (the states have shown it is no difference of positions: the delay's split is
-        then the exact model of the sample; assumed, with the drive's extra cycle at 250 Hz,
-        the law lost the Panda in every run). Steady: a full window of echoes agrees
-        (:meth:`CommandEcho.steady`), and once told the delay stays told while the echo
-        measures it, so that a command late now and then does not restart the law twice. Within
-        the lags the law can carry with the samples' velocity; else None (the law assumes a
-        driver period and scores two). docs/robot.md, "When the arm applies a command"."""
-        measured, longest = self.echo.delay_ns, self.echo.longest_ns
-        if measured is None or longest is None:
-            return None
-        sampler, period = self.sampler, self.sampler.driver_period_ns
-        if (
-            measured < self.period_ns
-            and 2 * longest > period
-            and not (
-                sampler.velocity_is_the_arms()
-                and (self.echo.steady(period) or self._told_delay_ns == measured)
-            )
-        ):
-            return None
-        stencil = sampler.velocity_stencil()
-        needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)
-        return measured if needed <= MAX_INPUT_LAGS else None
-
-    def _delay_moved(self) -> bool:
-        """Whether, once measured, the delay the law would be told now (the measured one, else
-        the driver period) differs from the one it was told at its start by half a driver
-        period or more: a first measurement that differs from the driver period the law
-        assumed, a driver whose timing changed, or a told delay no longer measured."""
-        if self.echo.delay_ns is None:
-            return False
-        period = self.sampler.driver_period_ns
-        now, told = self._measured_delay_ns(), self._told_delay_ns  # a delay of 0 is told
-        now, told = (period if v is None else v for v in (now, told))
-        return 2 * abs(now - told) >= period
 
     def _follow_driver(self, k: int) -> None:
         """Robot mode learnt something of the driver since the start that the law models: the
@@ -385,7 +340,7 @@ class RobotLoop:
         if sampler.velocity_kind != self._velocity_kind:
             self.count("velocity_kind_changes")
             what.append(f"the joint states' velocity is {sampler.velocity_description()}")
-        if self._delay_moved():
+        if self.delay.moved(k):
             assert self.echo.delay_ns is not None
             self.count("measured_delay_changes")
             what.append(

@@ -50,8 +50,10 @@ MS = 1_000_000  # ns
 class Latency:
     """How late each command reaches the driver beyond its next cycle (ms).
 
-    ``fixed_ms`` for every command; ``late_ms`` more for the first ``first`` commands, and for
-    each later one with probability ``probability`` (``seed`` fixes the draws).
+    ``fixed_ms`` for every command; ``late_ms`` more for the first ``first`` commands, for the
+    ``burst`` commands from the ``burst_from``-th on (counted from 1: a loaded machine's run of
+    late commands), and for each other one with probability ``probability`` (``seed`` fixes
+    the draws).
     """
 
     fixed_ms: float = 0.0
@@ -59,6 +61,8 @@ class Latency:
     first: int = 0
     probability: float = 0.0
     seed: int = 0
+    burst_from: int = 0
+    burst: int = 0
     _count: int = field(default=0, init=False)
     _rng: Any = field(default=None, init=False)
 
@@ -68,8 +72,10 @@ class Latency:
     def next_ns(self) -> int:
         """The latency of the next command (ns)."""
         self._count += 1
-        late = self._count <= self.first or (
-            self.probability > 0.0 and self._rng.random() < self.probability
+        late = (
+            self._count <= self.first
+            or 0 <= self._count - self.burst_from < self.burst
+            or (self.probability > 0.0 and self._rng.random() < self.probability)
         )
         return round((self.fixed_ms + (self.late_ms if late else 0.0)) * MS)
 

@@ -1,0 +1,99 @@
+"""Which delay robot mode tells the adaptive law, and when it tells another one.
+
+The driver's effort shows when the arm applies a command (:class:`~apc_feedback.command_echo.
+CommandEcho`); the law models the delay it is told (its input lags split by it). Told:
+
+- a delay of a whole sample or more (the sample's own command cannot act before the next
+  sample, which a split learnt from closed-loop data fills with a channel the plan leans on);
+- a delay where every kept echo is at most half a driver period (applied over its state's own
+  cycle: a lockstep simulator, where Eq. 16 holds as it stands and the driver period the law
+  would assume is a whole sample too late on a slow driver);
+- a steady delay under a sample where the samples' velocity is the arm's own (the states have
+  shown it is no difference of positions: the delay's split is then the exact model of the
+  sample; assumed, with the drive's extra cycle at 250 Hz, the law lost the Panda in every
+  run). Steady: a full window of echoes agrees (:meth:`CommandEcho.steady`), and once told
+  the delay stays told while the echo measures it, so that a command late now and then does
+  not restart the law twice.
+
+Else none: the law assumes a driver period and scores two. Each only within the lags the law
+can carry with the samples' velocity.
+
+A told delay is told again when the one robot mode would tell now differs from it by half a
+driver period or more. A longer one only once it has lasted :data:`RETELL_S`: a machine whose
+commands run late for a while (a burst of scheduling delay, a garbage collection) makes the
+echo show a cycle more for a window and then the old delay again, and a law told each of them
+restarts two or three times within a few samples, which lost the Panda on wall time
+(docs/robot.md, "When the arm applies a command"); lateness only adds to what the driver
+always takes. A shorter one at once: the delay the driver takes showing again after a
+longer one was told (held 0.5 s on a 12 ms model where commands acted after 8 ms, the
+physical Panda at 250 Hz with 30 % of its commands late was lost in one run of five); and a
+first measurement, where the law assumed a driver period. Plain Python: no rclpy.
+"""
+
+from __future__ import annotations
+
+from apc_feedback.adaptive_config import MAX_INPUT_LAGS
+from apc_feedback.command_echo import CommandEcho
+from apc_feedback.linearize import stencil_lags
+from apc_feedback.robot_sampling import RobotSampler
+
+#: How long a told delay must be measured otherwise before it is told again (s).
+RETELL_S = 0.5
+
+
+class DelayTelling:
+    """The delay told to the law (:attr:`told_ns`, None: a driver period assumed) for samples
+    ``period_ns`` apart, from ``echo`` and ``sampler``; :meth:`moved` each sample,
+    :meth:`tell` at each (re)start of the law."""
+
+    def __init__(self, echo: CommandEcho, sampler: RobotSampler, period_ns: int) -> None:
+        self.echo, self.sampler, self.period_ns = echo, sampler, period_ns
+        self.retell_samples = max(1, round(RETELL_S * 1e9 / period_ns))
+        self.told_ns: int | None = None
+        self._measured_told = False  # told_ns came from a measurement (not a first guess)
+        self._other_since: int | None = None  # the sample the delay to tell first differed
+
+    def tell(self) -> int | None:
+        """The delay to tell the law at its (re)start, now told (ns; None: a driver period)."""
+        self.told_ns = self.measured_ns()
+        self._measured_told = self.told_ns is not None
+        self._other_since = None
+        return self.told_ns
+
+    def measured_ns(self) -> int | None:
+        """The delay robot mode would tell now (module docstring), else None."""
+        echo, sampler = self.echo, self.sampler
+        measured, longest = echo.delay_ns, echo.longest_ns
+        if measured is None or longest is None:
+            return None
+        period = sampler.driver_period_ns
+        if (
+            measured < self.period_ns
+            and 2 * longest > period
+            and not (
+                sampler.velocity_is_the_arms() and (echo.steady(period) or self.told_ns == measured)
+            )
+        ):
+            return None
+        needed = stencil_lags(sampler.velocity_stencil(), self.period_ns * 1e-9, measured * 1e-9)
+        return measured if needed <= MAX_INPUT_LAGS else None
+
+    def moved(self, k: int) -> bool:
+        """Whether at sample ``k`` the delay to tell differs from the one told (the measured one,
+        else the driver period) by half a driver period or more: at once where none was
+        measured when the law was told or where it is shorter, a longer one after
+        :data:`RETELL_S` of it."""
+        if self.echo.delay_ns is None:
+            self._other_since = None
+            return False
+        period = self.sampler.driver_period_ns
+        now, told = self.measured_ns(), self.told_ns
+        now, told = (period if v is None else v for v in (now, told))
+        if 2 * abs(now - told) < period:
+            self._other_since = None
+            return False
+        if not self._measured_told or now < told:
+            return True  # a first measurement, or the shorter delay back: at once
+        if self._other_since is None:
+            self._other_since = k
+        return k - self._other_since >= self.retell_samples

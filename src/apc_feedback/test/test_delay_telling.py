@@ -1,0 +1,63 @@
+"""DelayTelling: which delay the law is told, and when another one is told instead."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from apc_feedback.delay_telling import RETELL_S, DelayTelling
+
+MS = 1_000_000
+T_NS = 10 * MS
+DRIVER_NS = 4 * MS
+
+
+def _telling(delay_ms: float | None):
+    """A 250 Hz driver whose velocity is the arm's, every echo ``delay_ms`` (steady)."""
+    echo = SimpleNamespace(delay_ns=None, longest_ns=None, steady=lambda period: True)
+    sampler = SimpleNamespace(
+        driver_period_ns=DRIVER_NS,
+        velocity_is_the_arms=lambda: True,
+        velocity_stencil=lambda: None,
+    )
+    telling = DelayTelling(echo, sampler, T_NS)
+
+    def measure(ms: float | None) -> None:
+        echo.delay_ns = echo.longest_ns = None if ms is None else round(ms * MS)
+
+    measure(delay_ms)
+    return telling, measure
+
+
+def test_a_first_measurement_is_told_at_once():
+    telling, measure = _telling(None)
+    assert telling.tell() is None  # the driver period assumed
+    measure(8.0)
+    assert telling.moved(1)
+    assert telling.tell() == 8 * MS
+
+
+def test_a_longer_delay_is_told_only_once_it_has_lasted():
+    telling, measure = _telling(8.0)
+    assert telling.tell() == 8 * MS
+    measure(12.0)
+    lasted = round(RETELL_S * 1e9 / T_NS)
+    assert not any(telling.moved(k) for k in range(100, 100 + lasted))
+    assert telling.moved(100 + lasted)
+
+
+def test_a_burst_that_ends_starts_the_count_again():
+    telling, measure = _telling(8.0)
+    telling.tell()
+    measure(12.0)
+    assert not any(telling.moved(k) for k in range(100, 130))
+    measure(8.0)
+    assert not telling.moved(130)
+    measure(12.0)
+    assert not any(telling.moved(k) for k in range(131, 175))
+
+
+def test_a_shorter_delay_is_told_at_once():
+    telling, measure = _telling(12.0)
+    assert telling.tell() == 12 * MS
+    measure(8.0)
+    assert telling.moved(1)
