@@ -27,7 +27,9 @@ restarts two or three times within a few samples, which lost the Panda on wall t
 always takes. A shorter one at once: the delay the driver takes showing again after a
 longer one was told (held 0.5 s on a 12 ms model where commands acted after 8 ms, the
 physical Panda at 250 Hz with 30 % of its commands late was lost in one run of five); and a
-first measurement, where the law assumed a driver period. Plain Python: no rclpy.
+first measurement, where the law assumed a driver period. Every (re)start of the law tells it
+the delay measured then, longer or not (an activation, a fault's recovery, an abort, a
+velocity of another kind). Plain Python: no rclpy.
 """
 
 from __future__ import annotations
@@ -48,16 +50,17 @@ class DelayTelling:
 
     def __init__(self, echo: CommandEcho, sampler: RobotSampler, period_ns: int) -> None:
         self.echo, self.sampler, self.period_ns = echo, sampler, period_ns
-        self.retell_samples = max(1, round(RETELL_S * 1e9 / period_ns))
+        self.retell_samples = round(RETELL_S * 1e9 / period_ns)
         self.told_ns: int | None = None
-        self._measured_told = False  # told_ns came from a measurement (not a first guess)
-        self._other_since: int | None = None  # the sample the delay to tell first differed
+        # The sample a longer delay than the one told was first measured at, and the last
+        # sample judged (a gap in the samples starts the count again).
+        self._longer_since: int | None = None
+        self._last_k: int | None = None
 
     def tell(self) -> int | None:
         """The delay to tell the law at its (re)start, now told (ns; None: a driver period)."""
         self.told_ns = self.measured_ns()
-        self._measured_told = self.told_ns is not None
-        self._other_since = None
+        self._longer_since = None
         return self.told_ns
 
     def measured_ns(self) -> int | None:
@@ -83,17 +86,20 @@ class DelayTelling:
         else the driver period) by half a driver period or more: at once where none was
         measured when the law was told or where it is shorter, a longer one after
         :data:`RETELL_S` of it."""
+        last, self._last_k = self._last_k, k
+        if last is None or not last <= k <= last + 1:  # judged again within a sample: no gap
+            self._longer_since = None
         if self.echo.delay_ns is None:
-            self._other_since = None
+            self._longer_since = None
             return False
         period = self.sampler.driver_period_ns
-        now, told = self.measured_ns(), self.told_ns
-        now, told = (period if v is None else v for v in (now, told))
+        measured, first = self.measured_ns(), self.told_ns is None
+        now, told = (period if v is None else v for v in (measured, self.told_ns))
         if 2 * abs(now - told) < period:
-            self._other_since = None
+            self._longer_since = None
             return False
-        if not self._measured_told or now < told:
+        if first or now < told:
             return True  # a first measurement, or the shorter delay back: at once
-        if self._other_since is None:
-            self._other_since = k
-        return k - self._other_since >= self.retell_samples
+        if self._longer_since is None:
+            self._longer_since = k
+        return k - self._longer_since >= self.retell_samples

@@ -55,8 +55,9 @@ controller commands nothing: another one may take the joints over).
 The driver's rate. The command leaves in its state's callback and the driver applies it at its
 next write, one driver period (plus the trip) after the state, which Eq. 16 does not model; a
 law that does (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start,
-or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`), and
-the samples' velocity as the states show it (docs/robot.md, "A robot's clock").
+or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`; which
+one, and when another is told, :class:`~apc_feedback.delay_telling.DelayTelling`), and the
+samples' velocity as the states show it (docs/robot.md, "A robot's clock").
 """
 
 from __future__ import annotations

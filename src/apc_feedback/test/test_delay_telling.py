@@ -61,3 +61,26 @@ def test_a_shorter_delay_is_told_at_once():
     assert telling.tell() == 12 * MS
     measure(8.0)
     assert telling.moved(1)
+
+
+def test_a_gap_in_the_samples_starts_the_count_again():
+    telling, measure = _telling(8.0)
+    telling.tell()
+    measure(12.0)
+    assert not any(telling.moved(k) for k in range(100, 140))
+    lasted = round(RETELL_S * 1e9 / T_NS)
+    assert not any(telling.moved(k) for k in range(150, 150 + lasted))  # from 150, not 100
+    assert telling.moved(150 + lasted)
+
+
+def test_no_measurement_starts_the_count_again():
+    telling, measure = _telling(8.0)
+    telling.tell()
+    measure(12.0)
+    assert not any(telling.moved(k) for k in range(100, 140))
+    measure(None)  # the echo forgot (a fault)
+    assert not telling.moved(140)
+    measure(12.0)
+    lasted = round(RETELL_S * 1e9 / T_NS)
+    assert not any(telling.moved(k) for k in range(141, 141 + lasted))
+    assert telling.moved(141 + lasted)

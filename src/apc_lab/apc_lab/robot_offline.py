@@ -67,6 +67,8 @@ class Latency:
     _rng: Any = field(default=None, init=False)
 
     def __post_init__(self) -> None:
+        if self.burst and self.burst_from < 1:
+            raise ValueError("burst_from counts commands from 1")
         self._rng = np.random.default_rng(self.seed)
 
     def next_ns(self) -> int:
