@@ -87,7 +87,7 @@ class DelayTelling:
         measured when the law was told or where it is shorter, a longer one after
         :data:`RETELL_S` of it."""
         last, self._last_k = self._last_k, k
-        if last is None or not last <= k <= last + 1:  # judged again within a sample: no gap
+        if last is None or k != last + 1:
             self._longer_since = None
         if self.echo.delay_ns is None:
             self._longer_since = None

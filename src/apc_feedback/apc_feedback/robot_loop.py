@@ -210,8 +210,8 @@ class RobotLoop:
                 self.count("start_waits_for_driver_period")
                 return NOTHING
             self._start(take.k, sample)
-        elif sampler.velocity_kind != self._velocity_kind or self.delay.moved(take.k):
-            self._follow_driver(take.k)
+        elif (moved := self.delay.moved(take.k)) or sampler.velocity_kind != self._velocity_kind:
+            self._follow_driver(take.k, moved)
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
             return Step(sample=sample)
@@ -328,20 +328,21 @@ class RobotLoop:
             expect(driver_period, (2.0 * driver_period,))
         self.law.expect_velocity_stencil(sampler.velocity_stencil())
 
-    def _follow_driver(self, k: int) -> None:
+    def _follow_driver(self, k: int, delay_moved: bool) -> None:
         """Robot mode learnt something of the driver since the start that the law models: the
         samples' velocity is another kind (that the driver's velocity is the backward
         difference of its positions takes states in motion to tell,
         :class:`~apc_feedback.robot_sampling.DifferenceCheck`), or the driver's effort shows
-        another delay to the arm applying a command. Counted and logged; a law that models its
-        samples is told and, if it commands, restarts its identification from Eq. 33 with its
-        commands on their way kept."""
+        another delay to the arm applying a command (``delay_moved``: judged once a sample,
+        :meth:`~apc_feedback.delay_telling.DelayTelling.moved`). Counted and logged; a law
+        that models its samples is told and, if it commands, restarts its identification from
+        Eq. 33 with its commands on their way kept."""
         sampler = self.sampler
         what = []
         if sampler.velocity_kind != self._velocity_kind:
             self.count("velocity_kind_changes")
             what.append(f"the joint states' velocity is {sampler.velocity_description()}")
-        if self.delay.moved(k):
+        if delay_moved:
             assert self.echo.delay_ns is not None
             self.count("measured_delay_changes")
             what.append(

@@ -28,6 +28,14 @@ def _telling(delay_ms: float | None):
     return telling, measure
 
 
+def _told_once_lasted(telling, start: int) -> bool:
+    """Not moved from sample ``start`` for ``retell_samples`` samples, then moved."""
+    lasted = telling.retell_samples
+    return not any(telling.moved(k) for k in range(start, start + lasted)) and telling.moved(
+        start + lasted
+    )
+
+
 def test_a_first_measurement_is_told_at_once():
     telling, measure = _telling(None)
     assert telling.tell() is None  # the driver period assumed
@@ -40,9 +48,8 @@ def test_a_longer_delay_is_told_only_once_it_has_lasted():
     telling, measure = _telling(8.0)
     assert telling.tell() == 8 * MS
     measure(12.0)
-    lasted = round(RETELL_S * 1e9 / T_NS)
-    assert not any(telling.moved(k) for k in range(100, 100 + lasted))
-    assert telling.moved(100 + lasted)
+    assert telling.retell_samples == round(RETELL_S * 1e9 / T_NS)
+    assert _told_once_lasted(telling, 100)
 
 
 def test_a_burst_that_ends_starts_the_count_again():
@@ -68,9 +75,7 @@ def test_a_gap_in_the_samples_starts_the_count_again():
     telling.tell()
     measure(12.0)
     assert not any(telling.moved(k) for k in range(100, 140))
-    lasted = round(RETELL_S * 1e9 / T_NS)
-    assert not any(telling.moved(k) for k in range(150, 150 + lasted))  # from 150, not 100
-    assert telling.moved(150 + lasted)
+    assert _told_once_lasted(telling, 150)  # counted from 150, not 100
 
 
 def test_no_measurement_starts_the_count_again():
@@ -81,6 +86,4 @@ def test_no_measurement_starts_the_count_again():
     measure(None)  # the echo forgot (a fault)
     assert not telling.moved(140)
     measure(12.0)
-    lasted = round(RETELL_S * 1e9 / T_NS)
-    assert not any(telling.moved(k) for k in range(141, 141 + lasted))
-    assert telling.moved(141 + lasted)
+    assert _told_once_lasted(telling, 141)
