@@ -41,9 +41,14 @@ supervisor): a law that cannot hold this arm on this driver (a 100 Hz driver wit
 a period late) would otherwise be handed it again and again, each time costing an excursion.
 
 While the fallback is in charge the supervisor waits for the error to settle (every joint
-within ``settle_error`` and moving off its set point no faster than ``settle_rate``, for
-``settle_time``) and then hands the joints back. Settled, not small: the fallback does not
-know a payload and holds it with a steady offset, which the adaptive law, once back, removes.
+within ``settle_error`` for ``settle_time``, and its error spread over the last ``settle_time``
+by no more than ``settle_rate`` times it) and then hands the joints back. The rate is judged
+from the positions over that window, not from the states' velocity: a drive's velocity
+differenced over one cycle of a quantised encoder flickers by a count per cycle (2^16 counts a
+revolution: 0.024 rad/s at 250 Hz, 0.096 rad/s at 1 kHz, beyond ``settle_rate``), and judged
+sample by sample the fallback never handed the physical Panda back. Settled, not small: the
+fallback does not know a payload and holds it with a steady offset, which the adaptive law,
+once back, removes.
 The caller (:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips,
 so identification restarts from Eq. 33.
 
@@ -169,7 +174,8 @@ class SupervisorConfig:
     )
     settle_rate: float = setting(
         0.02,
-        "hand-back: every |qd - qd_d| within this (rad/s) for settle_time as well",
+        "hand-back: every joint's q - q_d spread by at most this (rad/s) times settle_time over "
+        "the last settle_time as well",
         1e-6,
         100.0,
     )
@@ -239,6 +245,9 @@ class Supervisor:
         self.n_joints = n_joints
         self.bound = np.full(n_joints, config.error_bound)
         self._settle_samples = round(config.settle_time / period)
+        # The hand-back's rate: the error's spread over this many sample intervals.
+        self._rate_window = max(1, self._settle_samples)
+        self._rate_spread = config.settle_rate * self._rate_window * period
         self._streak = 0  # hand-overs, each within 20 settle times of the hand-back before
         self._handback_k: int | None = None
         self.latched = False  # the fallback keeps the joints for good (failed_handbacks)
@@ -254,6 +263,7 @@ class Supervisor:
         self._residual_mean = 0.0
         self._clipped_run = 0
         self._settled_run = 0
+        self._settling: deque[np.ndarray] = deque(maxlen=self._rate_window + 1)
 
     def update(
         self,
@@ -292,16 +302,15 @@ class Supervisor:
         if self._k_prev is not None and k != self._k_prev + 1:
             self._errors.clear()  # growth is measured over consecutive samples only
             self._clipped_run = self._settled_run = 0
+            self._settling.clear()
         self._k_prev = k
         if self.in_charge == FALLBACK:
             if self.latched:
                 return None
-            config = self.config
-            settled = (error <= config.settle_error).all() and (
-                np.abs(error_qd) <= config.settle_rate
-            ).all()
-            self._settled_run = self._settled_run + 1 if settled else 0
-            if self._settled_run > self._settle_samples << min(self._streak, 6):
+            within = bool((error <= self.config.settle_error).all())
+            self._settled_run = self._settled_run + 1 if within else 0
+            self._settling.append(np.array(error_q, dtype=float))
+            if self._settled_run > self._settle_samples << min(self._streak, 6) and self._still():
                 self.in_charge, self.reason = ADAPTIVE, ""
                 self._clear()
                 self._handback_k = k
@@ -319,6 +328,15 @@ class Supervisor:
         if trigger is not None:
             self.hand_over(trigger)
         return trigger
+
+    def _still(self) -> bool:
+        """Every joint's error spread over the last ``settle_time`` by at most ``settle_rate``
+        times it (see the module docstring)."""
+        settling = self._settling
+        if len(settling) < settling.maxlen:
+            return False
+        errors = np.array(settling)
+        return bool((errors.max(axis=0) - errors.min(axis=0) <= self._rate_spread).all())
 
     def expect_command_delay(self, driver_period: float) -> None:
         """The loop's driver period (s): a command computed now acts about two of them later
