@@ -13,9 +13,12 @@ HOLD_U_N = 0.5  # the scripted plan's nominal torque on a hold
 
 class ScriptedPlan:
     """A stand-in for the feedforward's plan (``GoalQueue``): the set points a test scripts by
-    sample, else a hold of the position measured at the first sample after a restart."""
+    sample, else a hold of the position measured at the first sample after a restart; a stop
+    spans its duration at samples ``period`` s apart, as ``GoalQueue.stopping`` has it."""
 
-    def __init__(self) -> None:
+    def __init__(self, period: float = 0.01) -> None:
+        self.period = period
+        self._stop_span: tuple[int, int] | None = None
         self.setpoints: dict[int, Setpoint] = {}
         self.queued: list[TrajectoryGoal] = []
         self.hold: np.ndarray | None = None
@@ -27,6 +30,7 @@ class ScriptedPlan:
         self.restarts += 1
         self.setpoints.clear()
         self.hold = None
+        self._stop_span = None
         dropped, self.queued = len(self.queued), []
         return dropped
 
@@ -36,6 +40,10 @@ class ScriptedPlan:
         self.stops.append((k, position.copy(), velocity.copy(), duration))
         self.setpoints.clear()
         self.hold = position.copy()
+        self._stop_span = (k, k + round(duration / self.period))
+
+    def stopping(self, k) -> bool:
+        return self._stop_span is not None and self._stop_span[0] <= k < self._stop_span[1]
 
     def add(self, goal: TrajectoryGoal) -> None:
         if goal.times_s[-1] <= 0.0:

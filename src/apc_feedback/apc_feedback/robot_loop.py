@@ -166,7 +166,6 @@ class RobotLoop:
         self.faulted = False  # watchdog: silent until a fresh state
         self._restart = False  # the next sample taken is a start
         self._replan = False  # and drops the plan (a fault, an abort; activation drops it then)
-        self._stop_end_k = 0  # the sample a stop ends at: no goal, no path tolerance before it
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self.command_state_ns: int | None = None  # driver stamp of the newest law command's
         # state, until its publish is reported
@@ -215,7 +214,7 @@ class RobotLoop:
         setpoint = self._setpoint(take.k, sample.position)
         if setpoint is None:
             return Step(sample=sample)
-        if take.k < self._stop_end_k and any_true(
+        if self.plan.stopping(take.k) and any_true(
             np.abs(sample.position - setpoint.q) > STOP_TOLERANCE
         ):
             self._stop(take.k, sample)  # the arm could not follow the stop: from where it is
@@ -308,7 +307,6 @@ class RobotLoop:
         """Bring the arm to rest from the ``sample``'s state, from sample ``k`` on."""
         assert sample.position is not None and sample.velocity is not None
         self.plan.stop(k, sample.position, sample.velocity, self.stop_time)
-        self._stop_end_k = k + round(self.stop_time / self.sampling.period)
 
     def _tell_law(self) -> None:
         """Tell a law that models its samples' timing what robot mode knows of the driver now:
@@ -384,7 +382,7 @@ class RobotLoop:
         assert sample.position is not None and sample.velocity is not None
         error = np.abs(sample.position - setpoint.q)
         tolerance = self.path_tolerance
-        moving = setpoint.k >= self._stop_end_k and any_true(setpoint.qd != 0.0)
+        moving = not self.plan.stopping(setpoint.k) and any_true(setpoint.qd != 0.0)
         if moving and any_true((tolerance > 0.0) & (error > tolerance)):
             j = int(np.argmax(np.where(tolerance > 0.0, error - tolerance, -np.inf)))
             self.count("path_tolerance_aborts")

@@ -169,6 +169,7 @@ class GoalQueue:
         self.feedforward: Feedforward | None = None
         self.queued: list[wire.TrajectoryGoal] = []
         self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
+        self._stop_plan: Trajectory | None = None  # the plan of the last stop()
 
     @classmethod
     def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> GoalQueue:
@@ -254,6 +255,7 @@ class GoalQueue:
             self.first_goal = None
         self.feedforward = None
         self._last_q = None
+        self._stop_plan = None
         return dropped
 
     def stop(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> None:
@@ -271,6 +273,13 @@ class GoalQueue:
             rest = np.clip(rest, np.minimum(lower, position), np.maximum(upper, position))
         plan = Quintic(position, rest, duration, qd0=velocity)
         self.feedforward = Feedforward(self.model, plan, self.period, k)
+        self._stop_plan = plan
+
+    def stopping(self, k: int) -> bool:
+        """Whether set point ``k`` is on the way to rest of :meth:`stop` (no goal: robot mode
+        holds it to no path tolerance and starts it again when the arm cannot follow it)."""
+        ff = self.feedforward
+        return ff is not None and ff.trajectory is self._stop_plan and ff.start_k <= k < ff.end_k()
 
     def rejoin(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> bool:
         """Rejoin the plan from the measured state at sample ``k`` (robot mode's hand-back from

@@ -258,6 +258,13 @@ def test_a_stop_brings_a_moving_arm_to_rest_within_its_deceleration(robot):
     assert np.max(np.abs([p.qdd for p in points]), axis=0) == pytest.approx(
         1.5 * np.abs(velocity) / 0.2, rel=0.01
     )
+    # its 20 samples are a stop's (no goal's: robot mode holds them to no path tolerance)
+    assert [q.stopping(k) for k in (29, 30, 49, 50)] == [False, True, True, False]
+    q.rejoin(40, Q0, np.zeros(3), 0.5)
+    assert not q.stopping(40)  # a hand-back's rejoin is the plan again
+    q.stop(60, Q0, velocity, 0.2)
+    q.restart()
+    assert not q.stopping(60)
 
 
 def test_a_stop_rests_inside_the_joint_limits(robot):
