@@ -695,7 +695,8 @@ def test_a_burst_of_late_commands_does_not_restart_the_law_that_holds_the_panda(
     the hold after the move (12 ms: on wall time the controllers' latency crosses a driver
     period now and then). The law keeps its 8 ms and holds the arm (measured 0.50 deg, no
     restart after the first tell). Told each delay at once, it restarted on 12 ms, then on the
-    driver period and on 8 ms again within 12 samples, and lost the arm (570-860 deg)."""
+    driver period and on 8 ms again within 12 samples, and lost the arm (570-860 deg); either
+    wait alone holds it (0.50 deg with a longer delay's, 0.56 with the window none waits)."""
     from support.panda import physical_panda_move
 
     from apc_lab.robot_offline import Latency
@@ -716,8 +717,47 @@ def test_a_burst_of_late_commands_does_not_restart_the_law_that_holds_the_panda(
     assert held.counts["measured_delay_changes"] == 1
 
     def at_once(loop):
-        loop.delay.retell_samples = 0
+        loop.delay.retell_samples = loop.delay.disagree_samples = 0
 
     lost = run(at_once)
     assert lost.counts["measured_delay_changes"] >= 3
     assert lost.max_tracking_error_deg() > 90.0
+
+
+@pytest.mark.parametrize(("first", "late"), [(1, 6), (5, 12)])
+def test_a_burst_of_late_commands_from_activation_is_told_and_then_what_the_driver_takes(
+    first, late
+):
+    """The Panda of the test above, ``late`` commands a cycle late from the ``first`` on (a
+    controller warming up at activation). 12 ms, a whole sample, is the first measurement,
+    told at once; the echoes then move to 8 ms, disagreeing for a window, and 8 ms is told
+    once they agree: two tells, the arm held (measured 0.41 / 0.73 deg). Told the driver
+    period at once while they disagreed, the law restarted a third time within 11-13 samples
+    and lost the arm (12.9 / 79.2 deg)."""
+    from support.panda import physical_panda_move
+
+    from apc_lab.robot_offline import Latency
+    from apc_plant_sim.effects import ArmEffects
+
+    def run(setup=None):
+        return physical_panda_move(
+            3.0,
+            4.0,
+            effects=ArmEffects(velocity="exact", command_delay=1),
+            latency=Latency(late_ms=4.0, burst_from=first, burst=late),
+            armature=None,
+            setup=setup,
+        )
+
+    held = run()
+    assert held.max_tracking_error_deg() < 1.0
+    assert held.counts["measured_delay_changes"] == 2
+    told = [text for _, text in held.lines if "effort shows" in text]
+    assert "12 ms" in told[0] and "8 ms" in told[1]
+
+    def none_at_once(loop):
+        loop.delay.disagree_samples = 0
+
+    lost = run(none_at_once)
+    assert lost.counts["measured_delay_changes"] == 3
+    assert lost.max_tracking_error_deg() > 10.0

@@ -27,15 +27,24 @@ restarts two or three times within a few samples, which lost the Panda on wall t
 always takes. A shorter one at once: the delay the driver takes showing again after a
 longer one was told (held 0.5 s on a 12 ms model where commands acted after 8 ms, the
 physical Panda at 250 Hz with 30 % of its commands late was lost in one run of five); and a
-first measurement, where the law assumed a driver period. Every (re)start of the law tells it
-the delay measured then, longer or not (an activation, a fault's recovery, an abort, a
-velocity of another kind). Plain Python: no rclpy.
+first measurement, where the law assumed a driver period. With the arm's own velocity, none in
+place of a told delay (a delay under a sample whose echoes do not agree) waits a window of
+echoes (:data:`~apc_feedback.command_echo.ECHOES` samples): a burst of late commands from
+activation has a whole sample or more told at once (12 ms on the Panda at 250 Hz), and while
+the echoes move to what the driver always takes (8 ms) they disagree until the burst's tail
+has left their window; told none at once there, the law restarted on the driver period and
+then on 8 ms within a few samples and lost the arm alone (13-79 deg). With a differenced
+velocity none is what a jittering delay under a sample is told for good, and it is told at
+once (held a window, the physical Panda at 250 Hz with 30 % of its commands late, told 12 ms
+at activation, was lost in one run of five). Every
+(re)start of the law tells it the delay measured then, longer or not (an activation, a
+fault's recovery, an abort, a velocity of another kind). Plain Python: no rclpy.
 """
 
 from __future__ import annotations
 
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS
-from apc_feedback.command_echo import CommandEcho
+from apc_feedback.command_echo import ECHOES, CommandEcho
 from apc_feedback.linearize import stencil_lags
 from apc_feedback.robot_sampling import RobotSampler
 
@@ -51,16 +60,19 @@ class DelayTelling:
     def __init__(self, echo: CommandEcho, sampler: RobotSampler, period_ns: int) -> None:
         self.echo, self.sampler, self.period_ns = echo, sampler, period_ns
         self.retell_samples = round(RETELL_S * 1e9 / period_ns)
+        # Samples echoes that disagree wait before none replaces a told delay (a window of them).
+        self.disagree_samples = ECHOES
         self.told_ns: int | None = None
-        # The sample a longer delay than the one told was first measured at, and the last
-        # sample judged (a gap in the samples starts the count again).
-        self._longer_since: int | None = None
+        # The sample from which the delay to tell has differed from the one told while it
+        # waits (a longer one, or none), and the last sample judged (a gap in the samples
+        # starts the count again).
+        self._differs_since: int | None = None
         self._last_k: int | None = None
 
     def tell(self) -> int | None:
         """The delay to tell the law at its (re)start, now told (ns; None: a driver period)."""
         self.told_ns = self.measured_ns()
-        self._longer_since = None
+        self._differs_since = None
         return self.told_ns
 
     def measured_ns(self) -> int | None:
@@ -85,21 +97,27 @@ class DelayTelling:
         """Whether at sample ``k`` the delay to tell differs from the one told (the measured one,
         else the driver period) by half a driver period or more: at once where none was
         measured when the law was told or where it is shorter, a longer one after
-        :data:`RETELL_S` of it."""
+        :data:`RETELL_S` of it, none with the arm's velocity after :attr:`disagree_samples`."""
         last, self._last_k = self._last_k, k
         if last is None or k != last + 1:
-            self._longer_since = None
+            self._differs_since = None
         if self.echo.delay_ns is None:
-            self._longer_since = None
+            self._differs_since = None
             return False
         period = self.sampler.driver_period_ns
         measured, first = self.measured_ns(), self.told_ns is None
         now, told = (period if v is None else v for v in (measured, self.told_ns))
         if 2 * abs(now - told) < period:
-            self._longer_since = None
+            self._differs_since = None
             return False
-        if first or now < told:
-            return True  # a first measurement, or the shorter delay back: at once
-        if self._longer_since is None:
-            self._longer_since = k
-        return k - self._longer_since >= self.retell_samples
+        if first:
+            return True  # a first measurement: at once
+        if now > told:
+            wait = self.retell_samples
+        elif measured is None and self.sampler.velocity_is_the_arms():
+            wait = self.disagree_samples  # for a burst's tail to leave the echoes' window
+        else:
+            return True  # a shorter delay: at once
+        if self._differs_since is None:
+            self._differs_since = k
+        return k - self._differs_since >= wait

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+from apc_feedback.command_echo import ECHOES
 from apc_feedback.delay_telling import RETELL_S, DelayTelling
 
 MS = 1_000_000
@@ -12,8 +13,10 @@ DRIVER_NS = 4 * MS
 
 
 def _telling(delay_ms: float | None):
-    """A 250 Hz driver whose velocity is the arm's, every echo ``delay_ms`` (steady)."""
-    echo = SimpleNamespace(delay_ns=None, longest_ns=None, steady=lambda period: True)
+    """A 250 Hz driver whose velocity is the arm's, every echo ``delay_ms`` (steady unless a
+    test sets ``echo.is_steady`` False: the kept echoes still disagree)."""
+    echo = SimpleNamespace(delay_ns=None, longest_ns=None, is_steady=True)
+    echo.steady = lambda period: echo.is_steady
     sampler = SimpleNamespace(
         driver_period_ns=DRIVER_NS,
         velocity_is_the_arms=lambda: True,
@@ -25,6 +28,7 @@ def _telling(delay_ms: float | None):
         echo.delay_ns = echo.longest_ns = None if ms is None else round(ms * MS)
 
     measure(delay_ms)
+    telling.echo_state = echo
     return telling, measure
 
 
@@ -87,3 +91,33 @@ def test_no_measurement_starts_the_count_again():
     assert not telling.moved(140)
     measure(12.0)
     assert _told_once_lasted(telling, 141)
+
+
+def test_none_in_place_of_a_told_delay_waits_a_window_of_echoes_with_the_arms_velocity():
+    """Told 12 ms (a burst of late commands from activation: a whole sample or more is told
+    without a steady echo), the echo then shows 8 ms with 12 ms ones still kept: under a
+    sample and not steady, robot mode would tell none (a driver period). With the arm's own
+    velocity that waits a window of echoes (the burst's tail leaving it), and 8 ms, steady
+    within it, is told at once: told none at once, the law restarted a third time within a
+    few samples (the Panda lost at 13-79 deg, test_robot_loop). Echoes that still disagree
+    after a window tell none; with a differenced velocity none is told at once (a jittering
+    delay under a sample is never told there)."""
+    telling, measure = _telling(12.0)
+    assert telling.tell() == 12 * MS
+    telling.echo_state.is_steady = False
+    measure(8.0)
+    assert telling.measured_ns() is None
+    assert not any(telling.moved(k) for k in range(1, 1 + ECHOES))
+    telling.echo_state.is_steady = True
+    assert telling.moved(1 + ECHOES) and telling.tell() == 8 * MS
+    telling.echo_state.is_steady = False
+    measure(4.0)
+    assert not any(telling.moved(k) for k in range(20, 20 + ECHOES))
+    assert telling.moved(20 + ECHOES)
+    assert telling.tell() is None
+    telling, measure = _telling(12.0)
+    telling.tell()
+    telling.sampler.velocity_is_the_arms = lambda: False
+    telling.echo_state.is_steady = False
+    measure(8.0)
+    assert telling.moved(1)
