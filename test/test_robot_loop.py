@@ -275,8 +275,8 @@ def test_closed_loop_hold_survives_a_late_first_command():
     up, a DDS hiccup): the transition it spans does not follow Eq. 16. With the model prior
     (alpha_model) the hold is unaffected; with P(0) = alpha I everywhere the identifier fits
     that one sample, Ĝ's velocity block turns indefinite within two steps and the arm is lost
-    (measured 0.22 deg with the recommended preset against 534 deg with Eq. 16's model and
-    P(0) = alpha I; the input lags alone keep that one within 4.3 deg)."""
+    (measured 0.18 deg with the recommended preset against 534 deg with Eq. 16's model and
+    P(0) = alpha I; the input lags alone do not save it: 213 deg with them and P(0) = alpha I)."""
     assert run_robot_loop(1.0, latency=Latency(late_ms=4.0, first=1)).max_deviation_deg() < 0.5
     flat = dict(recommended_settings(), alpha_model=0.0, input_lags=0)
     lost = run_robot_loop(1.0, latency=Latency(late_ms=4.0, first=1), settings=flat)
@@ -549,7 +549,7 @@ def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_
     """The physical Panda in MuJoCo on a 100 Hz driver whose cycle is 10.00013 ms (a wall
     clock's rate is never the nominal one) and whose drive adds a cycle: its effort shows
     20.00026 ms, which with the drive's differenced velocity is three input lags, and the law
-    restarts with it as at 10 ms exactly (2.3 deg, no hand-over). Before the lag count had its
+    restarts with it as at 10 ms exactly (2.1 deg, no hand-over). Before the lag count had its
     slack the delay asked for a fourth lag, was not told, and the law, left with the 10 ms an
     early echo had shown, was handed over 0.17 s in (6.0 deg; on wall time the same cell
     handed over in every run)."""
@@ -569,7 +569,7 @@ def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_
 def test_a_1khz_driver_that_misses_cycles_keeps_its_differenced_velocity_and_the_law():
     """The physical Panda in MuJoCo on a 1 kHz driver that publishes no state for 3 % of its
     cycles (``robot_sim`` on a loaded machine's wall clock: 1-3 %): the drive's difference is
-    found once and kept, so the law restarts once and tracks (0.38 deg). When a state after a
+    found once and kept, so the law restarts once and tracks (0.37 deg). When a state after a
     missed one counted as evidence, each miss made the velocity the arm's and then a difference
     again: 107 restarts of the identification in the run, 1.22 deg (on wall time the same cell
     was lost in 2 runs of 3 without the supervisor)."""
@@ -583,7 +583,7 @@ def test_a_1khz_driver_that_misses_cycles_keeps_its_differenced_velocity_and_the
 def test_a_driver_that_stalls_mid_move_keeps_its_differenced_velocity():
     """The physical Panda on a 250 Hz driver whose states stop for 25 ms in the move (a stall
     of the machine: on wall time one such run was lost): the drive is the same after it, so
-    the law is not restarted (one velocity-kind change in the run, 2.9 deg). When a gap longer
+    the law is not restarted (one velocity-kind change in the run, 1.2 deg). When a gap longer
     than max_age forgot the difference, the law restarted twice after it: 9.6 deg."""
     from support.panda import physical_panda_move
 
@@ -608,9 +608,11 @@ def _stalled_panda(start_s: float, stall_s: float, **options):
 def test_the_physical_panda_holds_through_a_stall_after_its_move(stall_s):
     """The physical Panda on a 250 Hz driver, states gone for 0.2-0.3 s in the hold after the
     move (a stalled machine: lost in one wall-time run), supervised as shipped: the watchdog's
-    hold carries the payload and the friction the law learnt, and the law takes the arm back
-    where it is (0.47 deg; with the model's gravity alone the wrist dropped, 6.7-20.5 deg and a
-    hand-over)."""
+    hold carries the payload and the friction the law learnt, and the law, back with the
+    states, brings the arm to rest from where it is (0.50-0.74 deg off the set point, no
+    hand-over). In the stall the wrist moves 3.2-4.2 deg and joints 1-2 up to 3.7-10.4 deg;
+    with the model's gravity alone the wrist drops 5.0-15.8 deg, and the stop from the state
+    found then keeps that arm within 0.57-0.58 deg of its set point too, no hand-over."""
     run = _stalled_panda(1.6, stall_s)
     assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
     assert run.max_tracking_error_deg() < 1.0
@@ -630,9 +632,10 @@ def test_the_physical_panda_is_brought_to_rest_after_a_stall_in_its_move(payload
     """The physical Panda on a 250 Hz driver, states gone for 0.1 s in its move's deceleration,
     supervised as shipped. The last command, then the watchdog's hold, drive the arm open-loop
     off the plan (the wrist at several rad/s when the states return); the recovery brings it to
-    rest from the state it finds over stop_time: 1.0-1.4 deg over payloads ±2 %, no hand-over.
-    Held at the measured position at once instead (stop_time 0), it overshot by 15-47 deg, and
-    3 of those 9 runs were lost (331-725 deg at the end)."""
+    rest from the state it finds over stop_time: 1.3-1.9 deg over the payloads here, 1.1-1.9
+    deg over payloads ±2 % (nine runs), no hand-over. Held at the measured position at once
+    instead (stop_time 0), it runs 14-30 deg off and is handed over, and 2 of those 9 runs are
+    lost (644 and 3005 deg at the end)."""
     run = _stalled_panda(0.9, 0.1, payload_kg=payload_kg)
     assert run.counts["watchdog"] == 1 and run.counts["supervisor.handovers"] == 0
     assert run.max_tracking_error_deg() < 3.0
@@ -642,9 +645,10 @@ def test_the_physical_panda_is_brought_to_rest_after_a_stall_in_its_move(payload
 
 def test_the_physical_panda_is_not_lost_to_a_longer_stall_in_its_move():
     """The same with the states gone for 0.2 s: the wrist turns faster than the stop plans to
-    slow it, so the stop starts again from where the arm is (0-12 times) and brings it to rest
-    (finals 0.5-1.8 deg, payload ±1 %). Held at the measured position at once, these three
-    runs were lost (570-1300 deg at the end; 6 of 9 over payloads ±2 %)."""
+    slow it, so the stop starts again from where the arm is (2-17 times; the saturation or
+    tracking-error trigger hands over once in each run, 2.8-3.3 deg) and brings it to rest
+    (finals 0.3-0.6 deg, payload ±1 %). Held at the measured position at once, these three
+    runs are lost (189-3322 deg at the end; 7 of 9 over payloads ±2 %)."""
 
     def stalled(payload_kg, **options):
         run = _stalled_panda(0.9, 0.2, payload_kg=payload_kg, **options)
@@ -660,9 +664,9 @@ def test_a_fractional_delay_is_told_where_the_velocity_is_the_arms():
     of a sample. Its states show the velocity is no difference of positions, so the law is told
     the delay the driver's effort shows once a window of its echoes agrees, and tracks alone
     (0.46 deg; with every physical effect 0.65-0.67 deg). Assuming the driver period with 8 ms
-    scored beside it, as for a differenced or estimated velocity, it lost the arm in every run
-    (52-62 deg; 26-34 deg with every effect): only a restart takes the better-scored delay,
-    and none came."""
+    scored beside it, as for a differenced or estimated velocity, it leaves the path in every
+    run, aborted at the path tolerance (18-59 deg over payloads ±1 %, 59 here; 35-53 deg with
+    every effect): only a restart takes the better-scored delay, and none comes."""
     import dataclasses
 
     from support.panda import physical_panda_move
