@@ -38,7 +38,7 @@ def test_with_the_prior_following_the_set_point_the_law_alone_tracks_the_pandas_
     rate_hz, physical
 ):
     """The recommended preset (``relinearize`` on), no supervisor: ideal at 250 Hz-1 kHz
-    (measured 0.12-0.17 deg), every physical effect on at 500 Hz-1 kHz (0.38-0.50 deg)."""
+    (measured 0.16-0.20 deg), every physical effect on at 500 Hz-1 kHz (0.35-0.36 deg)."""
     run = _panda_move(rate_hz, physical, relinearize=True)
     assert run.max_tracking_error_deg() < 1.0
     assert run.tracking_error_deg()[-1].max() < 0.5
@@ -47,8 +47,8 @@ def test_with_the_prior_following_the_set_point_the_law_alone_tracks_the_pandas_
 def test_with_the_prior_at_the_first_set_point_the_panda_is_lost():
     """The paper's prior (Eq. 33 at the first set point only, ``relinearize: false``) on the
     same 250 Hz move: the law over-corrects as the mass matrix changes, the goal is aborted at
-    the path tolerance and the diverging law cannot hold the arm at rest (33 deg, 16 deg at the
-    end, the stop started again 155 times; held at once it was lost, thousands of degrees)."""
+    the path tolerance and the diverging law cannot hold the arm at rest (48 deg, 19 deg at the
+    end, the stop started again 178 times; held at once it is lost, 740 deg)."""
     run = _panda_move(250, False, relinearize=False)
     assert run.max_tracking_error_deg() > 20.0 and run.counts["path_tolerance_aborts"] == 1
 
@@ -57,10 +57,11 @@ def test_at_100_hz_the_prior_of_the_estimated_velocity_holds_the_panda():
     """A 100 Hz driver that sends no velocity: robot mode's parabola spans two periods and the
     command acts one period late. With the prior in the sample's coordinates (the law told the
     estimate's stencil, as robot mode tells it) the law alone tracks the move (measured
-    0.35 deg; 0.54 deg with the preset's ``input_ring_limit``); with Eq. 33's split taking the
-    estimate for the velocity it leaves its path where the input change's weight is not raised
-    as well (``input_ring_limit`` 0: aborted at the path tolerance, 12.6 deg, where the arm
-    brought to rest at once was lost; with it the wrong prior tracks within 0.57 deg)."""
+    0.57 deg with the preset's ``input_ring_limit``, 0.45 deg without it); with Eq. 33's split
+    taking the estimate for the velocity it leaves its path where the input change's weight is
+    not raised as well (``input_ring_limit`` 0: aborted at the path tolerance, 12.4 deg, where
+    the arm brought to rest at once is lost, 1171 deg; with it the wrong prior tracks within
+    0.62 deg)."""
     assert _panda_move(100, False).max_tracking_error_deg() < 1.0
 
     def velocity_as_measured(loop):
