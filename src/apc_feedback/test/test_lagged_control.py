@@ -170,8 +170,8 @@ def test_nothing_is_raised_without_two_lags_or_a_weight_and_never_past_the_cap(m
 def test_the_law_s_commands_do_not_grow_on_an_arm_that_does_not_answer(model, limit):
     """The adaptive law, its commands acting a period late, on an arm that never moves (held by
     its friction, say) after a 1 mrad kick: without the limit its commands ring at the
-    Nyquist frequency up to the effort limits (measured 289 N m); with the preset's (1) the
-    ringing dies out and the law holds the few N m its integral and bias ask (5.4 N m)."""
+    Nyquist frequency up to the effort limits (measured 264 N m); with the preset's (1) the
+    ringing dies out and the law holds the few N m its integral and bias ask (6.9 N m)."""
     config = AdaptiveConfig.from_dict(
         {
             **recommended_settings(),
