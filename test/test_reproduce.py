@@ -35,9 +35,9 @@ def test_every_run_succeeded_and_the_report_exists(quick):
 
 
 def test_recommended_preset_beats_computed_torque_everywhere_but_one_final_error(quick):
-    """In max error on every joint of every case; in final error too, but for case (c)'s
-    joint 2, where computed torque happens to end 0.024 deg off (its 5 lb sag is on joint 3,
-    9.6 deg) and the preset 0.026 (0.022 with the faster model of ``alpha_model`` 1e-3)."""
+    """In max error on every joint of every case, and in final error too, closest on case
+    (c)'s joint 2, where computed torque happens to end 0.024 deg off (its 5 lb sag is on joint
+    3, 9.6 deg) and the preset 0.022 (0.014 with the faster model of ``alpha_model`` 1e-3)."""
     _, _, summary = quick
     results = summary["acceptance"]["recommended"]
     assert len(results) == 3  # cases a, b, c with P2(0) in the quick plan
