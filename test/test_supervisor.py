@@ -137,10 +137,11 @@ def test_saturation_fires_after_samples_in_a_row_clipped():
 
 
 def test_hand_back_after_the_error_settles_for_the_dwell_and_the_dwell_doubles_on_a_retrip():
-    """Settled: within settle_error for the dwell and spread over the last settle_time by at
-    most settle_rate times it (0.002 rad here), judged from the positions. The velocity is a
-    drive's difference of a quantised encoder that flickers by a count (1e-4 rad) every sample,
-    0.1 rad/s: judged sample by sample, it never handed back."""
+    """Settled: within settle_error for the dwell, and over the last settle_time the error
+    travelled (the sum of its changes from sample to sample) at most settle_rate times it
+    (0.002 rad here). The states' velocity is a 1 kHz drive's difference of a quantised encoder
+    that flickers by a count (1e-4 rad) every sample, 0.1 rad/s: judged sample by sample, it
+    never handed back; judged from the positions, the flicker travels 0.001 rad over 0.1 s."""
     config = SupervisorConfig(settle_error=0.01, settle_time=0.1, settle_rate=0.02)
     sup = Supervisor(config, 2, T)
     sup.hand_over("path_tolerance")
@@ -150,23 +151,27 @@ def test_hand_back_after_the_error_settles_for_the_dwell_and_the_dwell_doubles_o
     for k in range(40):
         flicker = count * (k % 2)
         error = np.array([max(0.004, 0.02 - 0.001 * k) - flicker, flicker])
-        events.append(sup.update(k, error, np.full(2, flicker / 0.001), **QUIET))  # 1 kHz
+        events.append(sup.update(k, error, np.full(2, flicker / 0.001), **QUIET))
     # within from k = 10 (0.02 - 0.010): the 11th sample within (k = 20) is past the 0.1 s
-    # dwell, but the error still spreads 0.006 over the 0.1 s before; at k = 24 it spreads
-    # 0.006 - 0.0039 over it, at k = 25 0.0049 - 0.0039
+    # dwell, but over the 0.1 s before it the error still travels 0.006 and more; at k = 24
+    # 0.006 - 0.004 and the flicker's 0.0008, at k = 25 0.0049 - 0.004 and 0.0009
     assert events.index("handback") == 25 and sup.in_charge == ADAPTIVE
     # tripped again soon after the hand-back: twice the dwell
     sup.hand_over("saturation")
     assert sup.dwell == 2.0
     # an error within the bound for longer than the dwell that keeps moving (0.03 rad/s) is
-    # not settled
+    # not settled, nor one ringing at the Nyquist frequency within a band of 0.0008 rad
     drifting = [
         sup.update(k, np.array([0.0003 * (k - 50), 0.0]), np.zeros(2), **QUIET)
         for k in range(50, 80)
     ]
-    assert "handback" not in drifting
-    assert sup.update(80, np.array([0.02, 0.0]), np.zeros(2), **QUIET) is None
-    events = [sup.update(k, np.zeros(2), np.zeros(2), **QUIET) for k in range(81, 110)]
+    ringing = [
+        sup.update(k, np.array([0.0004 * (-1) ** k, 0.0]), np.zeros(2), **QUIET)
+        for k in range(80, 110)
+    ]
+    assert "handback" not in drifting + ringing
+    assert sup.update(110, np.array([0.02, 0.0]), np.zeros(2), **QUIET) is None
+    events = [sup.update(k, np.zeros(2), np.zeros(2), **QUIET) for k in range(111, 140)]
     assert events.index("handback") == 20
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from apc_feedforward.goals import Sampled
@@ -40,7 +42,7 @@ class ScriptedPlan:
         self.stops.append((k, position.copy(), velocity.copy(), duration))
         self.setpoints.clear()
         self.hold = position.copy()
-        self._stop_span = (k, k + round(duration / self.period))
+        self._stop_span = (k, k + math.ceil(duration / self.period - 1e-9))  # Feedforward.end_k
 
     def stopping(self, k) -> bool:
         return self._stop_span is not None and self._stop_span[0] <= k < self._stop_span[1]

@@ -36,7 +36,9 @@ has left their window; told none at once there, the law restarted on the driver 
 then on 8 ms within a few samples and lost the arm alone (13-79 deg). With a differenced
 velocity none is what a jittering delay under a sample is told for good, and it is told at
 once (held a window, the physical Panda at 250 Hz with 30 % of its commands late, told 12 ms
-at activation, was lost in one run of five). Every
+at activation, was lost in one run of five). None where the echo shows a longer delay than
+the told one (one that needs more lags than the law carries) waits as a longer delay does; a
+wait of another kind than the one under way starts its count afresh. Every
 (re)start of the law tells it the delay measured then, longer or not (an activation, a
 fault's recovery, an abort, a velocity of another kind). Plain Python: no rclpy.
 """
@@ -63,16 +65,16 @@ class DelayTelling:
         # Samples echoes that disagree wait before none replaces a told delay (a window of them).
         self.disagree_samples = ECHOES
         self.told_ns: int | None = None
-        # The sample from which the delay to tell has differed from the one told while it
-        # waits (a longer one, or none), and the last sample judged (a gap in the samples
+        # The sample from which the delay to tell has differed from the one told, and the kind
+        # of wait it is in ("longer", "disagree"); the last sample judged (a gap in the samples
         # starts the count again).
-        self._differs_since: int | None = None
+        self._waiting: tuple[int, str] | None = None
         self._last_k: int | None = None
 
     def tell(self) -> int | None:
         """The delay to tell the law at its (re)start, now told (ns; None: a driver period)."""
         self.told_ns = self.measured_ns()
-        self._differs_since = None
+        self._waiting = None
         return self.told_ns
 
     def measured_ns(self) -> int | None:
@@ -96,28 +98,32 @@ class DelayTelling:
     def moved(self, k: int) -> bool:
         """Whether at sample ``k`` the delay to tell differs from the one told (the measured one,
         else the driver period) by half a driver period or more: at once where none was
-        measured when the law was told or where it is shorter, a longer one after
-        :data:`RETELL_S` of it, none with the arm's velocity after :attr:`disagree_samples`."""
+        measured when the law was told or where a shorter one is measured, a longer one after
+        :data:`RETELL_S` of it (also none where the echo shows a longer delay than the told
+        one, e.g. one that needs more lags than the law carries), none where echoes under the
+        told delay disagree with the arm's velocity after :attr:`disagree_samples`, else at
+        once. A wait of another kind starts its count afresh."""
         last, self._last_k = self._last_k, k
         if last is None or k != last + 1:
-            self._differs_since = None
-        if self.echo.delay_ns is None:
-            self._differs_since = None
+            self._waiting = None
+        echo = self.echo
+        if echo.delay_ns is None:
+            self._waiting = None
             return False
         period = self.sampler.driver_period_ns
-        measured, first = self.measured_ns(), self.told_ns is None
-        now, told = (period if v is None else v for v in (measured, self.told_ns))
-        if 2 * abs(now - told) < period:
-            self._differs_since = None
+        measured, told_ns = self.measured_ns(), self.told_ns
+        if told_ns is None:  # a first measurement: at once
+            return measured is not None and 2 * abs(measured - period) >= period
+        now = period if measured is None else measured
+        if 2 * abs(now - told_ns) < period:
+            self._waiting = None
             return False
-        if first:
-            return True  # a first measurement: at once
-        if now > told:
-            wait = self.retell_samples
+        if (echo.delay_ns if measured is None else measured) > told_ns:
+            kind, wait = "longer", self.retell_samples
         elif measured is None and self.sampler.velocity_is_the_arms():
-            wait = self.disagree_samples  # for a burst's tail to leave the echoes' window
+            kind, wait = "disagree", self.disagree_samples  # a burst's tail leaving the window
         else:
-            return True  # a shorter delay: at once
-        if self._differs_since is None:
-            self._differs_since = k
-        return k - self._differs_since >= wait
+            return True  # a shorter delay, or none for a differenced velocity: at once
+        if self._waiting is None or self._waiting[1] != kind:
+            self._waiting = (k, kind)
+        return k - self._waiting[0] >= wait

@@ -41,12 +41,16 @@ supervisor): a law that cannot hold this arm on this driver (a 100 Hz driver wit
 a period late) would otherwise be handed it again and again, each time costing an excursion.
 
 While the fallback is in charge the supervisor waits for the error to settle (every joint
-within ``settle_error`` for ``settle_time``, and its error spread over the last ``settle_time``
-by no more than ``settle_rate`` times it) and then hands the joints back. The rate is judged
-from the positions over that window, not from the states' velocity: a drive's velocity
-differenced over one cycle of a quantised encoder flickers by a count per cycle (2^16 counts a
-revolution: 0.024 rad/s at 250 Hz, 0.096 rad/s at 1 kHz, beyond ``settle_rate``), and judged
-sample by sample the fallback never handed the physical Panda back. Settled, not small: the
+within ``settle_error`` for ``settle_time``, and its error moving at a mean rate of at most
+``settle_rate`` over the last ``settle_time``: the sum of its changes from sample to sample
+there, the distance it travelled, within ``settle_rate`` times ``settle_time``) and then hands
+the joints back. The rate is judged from the positions at the samples, not from the states'
+velocity: a drive's velocity differenced over one cycle of a quantised encoder flickers by a
+count per cycle (2^16 counts a revolution: 0.024 rad/s at 250 Hz, 0.096 rad/s at 1 kHz,
+beyond ``settle_rate``), and judged sample by sample the fallback never handed the physical
+Panda back; a count each sample T = 10 ms apart is 0.0096 rad/s. The distance travelled, not
+the spread, so that an error ringing within a small band (at the Nyquist frequency, say) is
+not settled either. Settled, not small: the
 fallback does not know a payload and holds it with a steady offset, which the adaptive law,
 once back, removes.
 The caller (:class:`~apc_feedback.robot_loop.RobotLoop`) resets the adaptive law when it trips,
@@ -174,8 +178,8 @@ class SupervisorConfig:
     )
     settle_rate: float = setting(
         0.02,
-        "hand-back: every joint's q - q_d spread by at most this (rad/s) times settle_time over "
-        "the last settle_time as well",
+        "hand-back: every joint's q - q_d moving at a mean rate of at most this (rad/s) over "
+        "the last settle_time as well (the distance it travels there, judged at the samples)",
         1e-6,
         100.0,
     )
@@ -245,9 +249,9 @@ class Supervisor:
         self.n_joints = n_joints
         self.bound = np.full(n_joints, config.error_bound)
         self._settle_samples = round(config.settle_time / period)
-        # The hand-back's rate: the error's spread over this many sample intervals.
+        # The hand-back's rate: how far the error travels over this many sample intervals.
         self._rate_window = max(1, self._settle_samples)
-        self._rate_spread = config.settle_rate * self._rate_window * period
+        self._travel = config.settle_rate * self._rate_window * period
         self._streak = 0  # hand-overs, each within 20 settle times of the hand-back before
         self._handback_k: int | None = None
         self.latched = False  # the fallback keeps the joints for good (failed_handbacks)
@@ -330,13 +334,13 @@ class Supervisor:
         return trigger
 
     def _still(self) -> bool:
-        """Every joint's error spread over the last ``settle_time`` by at most ``settle_rate``
-        times it (see the module docstring)."""
+        """Every joint's error travelled at most ``settle_rate`` times ``settle_time`` over the
+        last ``settle_time`` (see the module docstring)."""
         settling = self._settling
         if len(settling) < settling.maxlen:
             return False
-        errors = np.array(settling)
-        return bool((errors.max(axis=0) - errors.min(axis=0) <= self._rate_spread).all())
+        travel = np.abs(np.diff(np.array(settling), axis=0)).sum(axis=0)
+        return bool((travel <= self._travel).all())
 
     def expect_command_delay(self, driver_period: float) -> None:
         """The loop's driver period (s): a command computed now acts about two of them later

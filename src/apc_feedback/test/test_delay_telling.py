@@ -121,3 +121,38 @@ def test_none_in_place_of_a_told_delay_waits_a_window_of_echoes_with_the_arms_ve
     telling.echo_state.is_steady = False
     measure(8.0)
     assert telling.moved(1)
+
+
+def test_a_wait_of_another_kind_starts_its_count_afresh():
+    """A longer delay waiting, then echoes under the told one that disagree (a burst that got
+    later before it ended): the window's wait starts when they do, not when the longer one
+    did; and the other way round."""
+    telling, measure = _telling(12.0)
+    telling.tell()
+    measure(16.0)
+    assert not any(telling.moved(k) for k in range(1, 21))
+    telling.echo_state.is_steady = False
+    measure(8.0)
+    assert not any(telling.moved(k) for k in range(21, 21 + ECHOES))
+    assert telling.moved(21 + ECHOES)
+    telling, measure = _telling(12.0)
+    telling.tell()
+    telling.echo_state.is_steady = False
+    measure(8.0)
+    assert not any(telling.moved(k) for k in range(1, 9))
+    telling.echo_state.is_steady = True
+    measure(16.0)
+    assert _told_once_lasted(telling, 9)
+
+
+def test_a_delay_longer_than_the_law_carries_waits_as_a_longer_one():
+    """40 ms at T = 10 ms needs more lags than the law carries, so none would be told; the echo
+    shows it longer than the 12 ms told, and it waits RETELL_S as a longer delay does, with
+    either kind of velocity."""
+    for arms in (True, False):
+        telling, measure = _telling(12.0)
+        telling.tell()
+        telling.sampler.velocity_is_the_arms = lambda arms=arms: arms
+        measure(40.0)
+        assert telling.measured_ns() is None
+        assert _told_once_lasted(telling, 1)
