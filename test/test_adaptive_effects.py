@@ -33,7 +33,7 @@ def _max_error_deg(effect: str, **options) -> float:
     [
         # A command applied one period late: G_1 carries it (measured 0.13 deg with two lags
         # and Ĝ(0) split by the delay T, 8.1 deg with Eq. 16).
-        ("delay", {"input_lags": 2, "input_delay": 0.01}, 0.15, 5.0),
+        ("delay", {"input_lags": 2, "input_delay": 0.01}, 0.2, 5.0),
         # The velocity differenced from positions over one period carries half of each of the
         # last two periods' inputs (measured 0.05 deg with two lags split by T/2; without them
         # 0.96 with a model that moves as fast as alpha_model 1e-3 lets it and the paper's
