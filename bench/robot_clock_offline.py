@@ -17,7 +17,9 @@ error from 1 to 38 deg. So every cell is five runs that differ as real runs do, 
 within ±1 % (:data:`PAYLOAD_FACTORS`) and, with late commands, the draws (seeds 0-4), and
 reports the median and the worst run's max error over the joints, the worst final error
 (deg, at the samples), the runs beyond :data:`apc_lab.wall_clock.LOST_DEG` ("lost", the
-wall-time benchmark's rule) and the runs with a hand-over. About a minute on one core.
+wall-time benchmark's rule), the runs with a hand-over and, in the JSON, ``chatter_nm``: how
+far the command moves from one sample to the next in the hold after the move, the worst run's
+worst joint's mean |u(k) - u(k-1)| (N m). About three minutes on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
         [--ideal-velocity] [--no-armature] [--alpha-model A] [--json FILE]
@@ -53,6 +55,10 @@ EFFECTS = ("ideal", "physical")
 RATES_HZ = (100, 250, 500, 1000)
 #: The runs of a cell: the payload times these (run i also draws late commands with seed i).
 PAYLOAD_FACTORS = (1.0, 0.99, 0.995, 1.005, 1.01)
+#: The hold after the move (it ends 1.2 s after activation) from which the commands' chatter
+#: is measured: the worst joint's mean |u(k) - u(k-1)| (N m), docs/robot.md, "Commands that
+#: chatter".
+CHATTER_FROM_S = 1.4
 #: law label -> supervisor (None: the adaptive law alone).
 LAWS: dict[str, SupervisorConfig | None] = {
     "adaptive alone": None,
@@ -110,6 +116,7 @@ def one_run(
         "max_deg": errors.max(axis=0).round(3).tolist(),
         "final_deg": errors[-1].round(3).tolist(),
         "handovers": run.counts.get("supervisor.handovers", 0),
+        "chatter_nm": round(float(np.nanmax(run.command_chatter_nm(CHATTER_FROM_S))), 2),
     }
 
 
@@ -126,6 +133,7 @@ def summarise(runs: list[dict]) -> dict:
         "lost": sum(w > LOST_DEG for w in worst),
         "runs": len(runs),
         "handover_runs": sum(r["handovers"] > 0 for r in runs),
+        "chatter_nm": max(_finite(r["chatter_nm"]) for r in runs),
     }
 
 
@@ -176,7 +184,7 @@ def measure(
                             f"{law:37s} median {cell['median_max_deg']:8.2f} worst "
                             f"{cell['max_deg']:8.2f} / {cell['final_deg']:7.2f}  lost "
                             f"{cell['lost']}/{cell['runs']}  hand-overs in "
-                            f"{cell['handover_runs']}",
+                            f"{cell['handover_runs']}  chatter {cell['chatter_nm']:.1f} N m",
                             flush=True,
                         )
     return cells

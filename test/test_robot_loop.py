@@ -771,3 +771,27 @@ def test_a_burst_of_late_commands_from_activation_is_told_and_then_what_the_driv
     lost = run(none_at_once)
     assert lost.counts["measured_delay_changes"] == 3
     assert lost.max_tracking_error_deg() > 10.0
+
+
+def test_a_runs_chatter_is_the_mean_change_of_its_commands_from_a_time_on():
+    """``RobotRun.command_chatter_nm``: per joint, the mean |u(k) - u(k-1)| of the commands
+    sent from ``from_s`` after activation (the offline grid's ``chatter_nm``); NaN with fewer
+    than two. On the physical Panda at 250 Hz the hold after the move chatters by more than
+    10 N m on a shoulder joint; on the ideal arm by nothing (docs/robot.md, "Commands that
+    chatter")."""
+    from apc_lab.robot_offline import RobotRun
+
+    s = 1_000_000_000
+    commands = [(50 * s + k * 10_000_000, np.array([k % 2 * 4.0, 1.0 * k])) for k in range(10)]
+    run = RobotRun(np.zeros(2), [], commands=commands, activated_ns=50 * s)
+    assert run.command_chatter_nm(0.0).tolist() == [4.0, 1.0]
+    assert run.command_chatter_nm(0.075).tolist() == [4.0, 1.0]  # from the 9th: two commands
+    assert np.isnan(run.command_chatter_nm(0.085)).all()
+
+    from support.panda import physical_panda_move
+
+    from apc_plant_sim.effects import ArmEffects
+
+    assert physical_panda_move(2.5, 4.0).command_chatter_nm(1.4).max() > 10.0
+    ideal = physical_panda_move(2.5, 4.0, effects=ArmEffects(), armature=None)
+    assert ideal.command_chatter_nm(1.4).max() < 0.5

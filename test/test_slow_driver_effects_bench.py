@@ -94,10 +94,12 @@ def test_a_cell_counts_a_run_that_blew_up_as_lost(sde):
     simulation blew up) is the cell's worst and lost, whatever its place among the runs."""
     from robot_clock_offline import summarise
 
-    fine = {"max_deg": [0.3, 0.2], "final_deg": [0.01, 0.02], "handovers": 0}
-    blown = {"max_deg": [float("nan"), 0.2], "final_deg": [float("nan"), 0.0], "handovers": 1}
+    nan = float("nan")
+    fine = {"max_deg": [0.3, 0.2], "final_deg": [0.01, 0.02], "handovers": 0, "chatter_nm": 1.5}
+    blown = {"max_deg": [nan, 0.2], "final_deg": [nan, 0.0], "handovers": 1, "chatter_nm": nan}
     for runs in ([fine, blown, fine], [blown, fine, fine]):
         cell = summarise(runs)
         assert cell["max_deg"] == float("inf") and cell["final_deg"] == float("inf")
+        assert cell["chatter_nm"] == float("inf")
         assert cell["lost"] == 1 and cell["runs"] == 3 and cell["handover_runs"] == 1
         assert cell["median_max_deg"] == 0.3

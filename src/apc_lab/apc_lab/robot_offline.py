@@ -86,14 +86,17 @@ class Latency:
 class RobotRun:
     """One run: the start position; per driver cycle (time ns, q), with the set point's q
     appended for the cycles whose state was a sample; the loop's timing figures at the end
-    (:meth:`apc_feedback.sample_timing.SampleTiming.figures`, us), its counters and its logged
-    lines ``(level, text)``."""
+    (:meth:`apc_feedback.sample_timing.SampleTiming.figures`, us), its counters, its logged
+    lines ``(level, text)``, the commands it sent ``(time ns, torque in the driver's order)``
+    and when it was activated (ns)."""
 
     q0: np.ndarray
     log: list[tuple]
     timing: dict[str, float] = field(default_factory=dict)
     counts: Counter = field(default_factory=Counter)
     lines: list[tuple[str, str]] = field(default_factory=list)
+    commands: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    activated_ns: int = 0
 
     @property
     def q(self) -> np.ndarray:
@@ -110,6 +113,16 @@ class RobotRun:
     def max_tracking_error_deg(self) -> float:
         """Largest |q - q_d| at the samples, deg."""
         return float(self.tracking_error_deg().max())
+
+    def command_chatter_nm(self, from_s: float) -> np.ndarray:
+        """Per joint (driver order), the mean |u(k) - u(k-1)| of the commands sent from
+        ``from_s`` s after activation on (N m): how much the command moves from one sample to
+        the next (docs/robot.md, "Commands that chatter"). NaN with fewer than two."""
+        start = self.activated_ns + round(from_s * 1e9)
+        sent = np.array([u for t, u in self.commands if t >= start])
+        if len(sent) < 2:
+            return np.full(len(self.q0), np.nan)
+        return np.abs(np.diff(sent, axis=0)).mean(axis=0)
 
 
 def run_robot_loop(
@@ -256,6 +269,7 @@ def run_robot_loop(
     draws = np.random.default_rng(missed_seed)
     transport = round(transport_ms * MS)
     log: list[tuple] = []
+    commands: list[tuple[int, np.ndarray]] = []
     # Before activation the brakes hold the arm (the driver has no command yet).
     moved = goal_deg is None
 
@@ -266,6 +280,7 @@ def run_robot_loop(
             # its first cycle after that (a cycle at the same instant has already run).
             arrival = now + 1 + latency.next_ns()
             heapq.heappush(events, (arrival, COMMAND, next(order), step.command.copy()))
+            commands.append((now, step.command.copy()))
             loop.command_published(now)
         plan = loop.plan.feedforward
         if not moved and plan is not None and step.setpoint is not None:
@@ -321,4 +336,4 @@ def run_robot_loop(
                 loop.activate()
             handle(loop.tick(now), now)
             heapq.heappush(events, (now + T_NS, WATCHDOG, next(order), None))
-    return RobotRun(q0, log, loop.timing.figures(), counts, lines)
+    return RobotRun(q0, log, loop.timing.figures(), counts, lines, commands, t_act)
