@@ -21,7 +21,8 @@ import apc_msgs_py as wire
 from apc_feedback.node import FeedbackNode
 from apc_feedforward.node import FeedforwardNode
 from apc_feedforward.trajectory import Waypoints
-from apc_lab.experiment import RunSpec, recorder_node
+from apc_lab.experiment import RunSpec
+from apc_lab.run_recorder import recorder_node
 from apc_lab.scenario import paper_scenario, paper_settings, run_offline
 from apc_plant_sim.node import PlantNode
 from apc_recording.runs import load_run

@@ -32,10 +32,18 @@ import yaml
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
+import apc_msgs_py as wire
 from apc_core.nodeutil import EXECUTORS, StopSignals, destroy_nodes, make_executor
 from apc_core.params import ConfigError, params_from
 from apc_feedback.laws import CONTROLLER_KINDS, LAWS
 from apc_feedback.presets import DEFAULT_PRESET
+from apc_lab.run_recorder import (
+    drain,
+    recorder_hears_controllers,
+    recorder_node,
+    take_what_is_queued,
+    wait_for_resends,
+)
 from apc_lab.scenario import (
     PAPER_CASES,
     PRESETS,
@@ -134,85 +142,12 @@ class RunSpec:
         return {"feedforward_node": feedforward, "feedback_node": feedback, "plant_node": plant}
 
 
-def recorder_node(
-    path: Path, context: rclpy.Context, description: Mapping[str, Any], sim_time: bool = True
-) -> Any:
-    """A recorder writing ``path``, the run's description in ``custom_data['apc.run']`` (what
-    :func:`apc_recording.runs.load_run` reads back)."""
-    from apc_recording.recorder import RecorderNode
-
-    return RecorderNode(
-        output=path,
-        context=context,
-        parameter_overrides=[Parameter("use_sim_time", value=sim_time)],
-        custom_data={"apc.run": yaml.safe_dump(dict(description), sort_keys=False)},
-    )
-
-
-def _recorder_hears_controllers(recorder: Any, controller: str) -> bool:
-    """True once the recorder has discovered the controllers' publishers (so sample 0 is kept)."""
-    import apc_msgs_py as wire
-
-    topics = [wire.SETPOINT, wire.FEEDFORWARD_TORQUE, wire.FEEDBACK_TORQUE]
-    if controller == "adaptive":
-        topics.append(wire.ESTIMATE)
-    return all(recorder.count_publishers(recorder.resolve_topic_name(t)) >= 1 for t in topics)
-
-
 def wait_for(executor: Any, condition: Any, timeout_s: float, what: str) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:
             raise TimeoutError(f"{what} not discovered within {timeout_s} s")
         executor.spin_once(timeout_sec=0.02)
-
-
-#: Topics of which a complete lockstep recording holds a message for every sample 0..n.
-_PER_SAMPLE_TOPICS = (
-    "joint_states",
-    "feedforward/setpoint",
-    "feedforward/torque",
-    "feedback/torque",
-)
-
-
-def _drain(
-    executor: Any,
-    recorder: Any,
-    n_samples: int,
-    stop: Any,
-    least_s: float = 0.5,
-    most_s: float = 3.0,
-) -> None:
-    """Let the recorder take what is still queued once the plant has finished: at least
-    ``least_s`` (the plant's final /diagnostics), and up to ``most_s`` until it holds every
-    sample 0..``n_samples`` of the per-sample topics (a recorder that lagged behind a fast
-    lockstep run catches up instead of the file losing its tail)."""
-    names = [recorder.resolve_topic_name(t) for t in _PER_SAMPLE_TOPICS]
-    t0 = time.monotonic()
-    while True:
-        elapsed = time.monotonic() - t0
-        complete = all(recorder.counts.get(name, 0) > n_samples for name in names)
-        if elapsed >= most_s or (elapsed >= least_s and complete):
-            return
-        executor.spin_once(timeout_sec=0.01)
-        stop.check()
-
-
-def _take_what_is_queued(
-    executor: Any, recorder: Any, quiet_s: float = 0.1, most_s: float = 1.0
-) -> None:
-    """After an interruption, with the plant stopped: let the recorder take what is still
-    queued for it, until it has taken nothing for ``quiet_s`` (other callbacks, such as the
-    stopped plant's unmatched publishers, do not count), at most ``most_s``. A recorder that
-    lagged behind a fast lockstep run would otherwise lose the samples in flight, published
-    before the signal."""
-    t0 = last = time.monotonic()
-    taken = sum(recorder.counts.values())
-    while (now := time.monotonic()) - last < quiet_s and now - t0 < most_s:
-        executor.spin_once(timeout_sec=0.01)
-        if (count := sum(recorder.counts.values())) != taken:
-            taken, last = count, time.monotonic()
 
 
 def overrides(values: Mapping[str, Any]) -> list[Parameter]:
@@ -304,7 +239,7 @@ def run_in_process(
                 executor.add_node(node)
             wait_for(
                 executor,
-                lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
+                lambda: stop.check() or recorder_hears_controllers(recorder, spec.controller),
                 30.0,
                 "the controllers' publishers",
             )
@@ -319,7 +254,7 @@ def run_in_process(
                 stop.check()
                 bar.update(plant.k)
             bar.close()
-            _drain(executor, recorder, plant.n_samples if plant.done else 0, stop)
+            drain(executor, recorder, plant.n_samples if plant.done else 0, stop)
             if not plant.done:
                 return RunOutcome(
                     path, False, f"timed out after {timeout_s} s", plant.k, _since(t0)
@@ -331,7 +266,7 @@ def run_in_process(
             samples = plant.k if plant is not None else 0
             if plant is not None and executor is not None and context.ok():
                 executor.remove_node(plant)  # it publishes no more
-                _take_what_is_queued(executor, recorder)
+                take_what_is_queued(executor, recorder)
             return RunOutcome(
                 path, False, f"interrupted ({exc})".replace(" ()", ""), samples, _since(t0)
             )
@@ -396,7 +331,7 @@ def run_in_processes(
             start("feedback_node")
             wait_for(
                 executor,
-                lambda: stop.check() or _recorder_hears_controllers(recorder, spec.controller),
+                lambda: stop.check() or recorder_hears_controllers(recorder, spec.controller),
                 60.0,
                 "the controllers' publishers",
             )
@@ -417,7 +352,7 @@ def run_in_processes(
                             _since(t0),
                         )
             bar.close()
-            _drain(executor, recorder, spec.scenario.n_samples if plant.poll() == 0 else 0, stop)
+            drain(executor, recorder, spec.scenario.n_samples if plant.poll() == 0 else 0, stop)
             code = plant.poll()
             if code is None:
                 return RunOutcome(
@@ -433,9 +368,15 @@ def run_in_processes(
         except (KeyboardInterrupt, ExternalShutdownException) as exc:
             plant = procs.get("plant_node")
             if plant is not None and recorder is not None and executor is not None:
+                if context.ok():
+                    # The recorder is on the plant's /clock: its time says how many samples
+                    # the plant has published.
+                    period_ns = wire.seconds_to_ns(spec.scenario.period)
+                    published = recorder.get_clock().now().nanoseconds // period_ns
+                    wait_for_resends(executor, recorder, lambda: plant.poll() is None, published)
                 stop_processes([plant], timeout_s=0.5)  # it publishes no more
                 if context.ok():
-                    _take_what_is_queued(executor, recorder)
+                    take_what_is_queued(executor, recorder)
             return RunOutcome(
                 path, False, f"interrupted ({exc})".replace(" ()", ""), samples(), _since(t0)
             )

@@ -55,9 +55,9 @@ from apc_lab.experiment import (
     Progress,
     law_parameters,
     overrides,
-    recorder_node,
     wait_for,
 )
+from apc_lab.run_recorder import recorder_node
 from apc_lab.scenario import (
     CONFIG_DIR,
     PAPER_CASES,
