@@ -27,7 +27,6 @@ import contextlib
 import dataclasses
 import os
 import random
-import re
 import signal
 import subprocess
 import sys
@@ -46,7 +45,7 @@ from support.sim_clock import FB, FF, ClockStepper
 
 import apc_msgs_py as wire
 from apc_lab.experiment import RunSpec
-from apc_lab.run_recorder import PER_SAMPLE_TOPICS, RESEND_WAIT_S
+from apc_lab.run_recorder import RESEND_WAIT_S
 from apc_lab.scenario import paper_scenario, paper_settings
 from apc_recording.bag import BagTruncatedWarning, bag_info, read_messages
 from apc_recording.bag.recovery import main as bag_recover
@@ -447,81 +446,6 @@ def test_experiment_runner_stops_on_signal_within_2s(tmp_path, sig, processes):
     counts, newest = _stop_runner_by_signal(tmp_path, sig, processes)
     assert counts["/joint_states"] >= 30, counts
     assert counts["/feedforward/torque"] >= newest + 1, (counts, newest)
-
-
-@pytest.mark.ros
-@pytest.mark.slow
-def test_a_runner_whose_recorder_lost_samples_keeps_the_run_until_they_are_resent(tmp_path):
-    """The runner (and its recorder) stopped with SIGSTOP while the plant, in its own process,
-    runs on for 250 samples: the recorder's readers lose samples of several writers (its
-    shared-memory port overflows) and hold back every later sample of each until the writer
-    resends. Interrupted then, the recording holds every per-sample topic from sample 0 up to
-    the signal: where a writer had not yet resent (within 0.2 s) the runner keeps the run going
-    until it has, says so, and the recording reaches the sample it names; else it reaches the
-    newest answer the test saw before the signal. Stopped at once as before, the recording
-    ended at the gap: joint states 49 on (273 of the 322 wanted) in 2 runs of 2.
-
-    Real time (100 Hz), not lockstep: a writer resends only what its history still holds
-    (apc_msgs_py.CONTROL_WRITER_DEPTH samples), and a lockstep run going on for a heartbeat
-    (3 s) can run further than that past a lost sample: in one such run joint states 50-53
-    were gone for good."""
-    obs = Observer(states=False)
-    out = tmp_path / "runs"
-    cmd = [sys.executable, "-m", "apc_lab.experiment", "--case", "c", "--hold", "60"]
-    cmd += ["--quiet", "--out", str(out), "--name", "lost", "--timeout", "120", "--processes"]
-    cmd += ["--mode", "realtime"]
-    err_path = tmp_path / "runner.err"
-    with open(err_path, "wb") as err:
-        runner = subprocess.Popen(
-            cmd, stdout=subprocess.DEVNULL, stderr=err, start_new_session=True
-        )
-    try:
-        heard = f"/{wire.JOINT_STATES}: 1 publisher"
-        obs.spin_until(lambda: heard in err_path.read_text(), 60, "the run", [runner])
-        obs.spin_until(lambda: len(obs.ff) >= 50, 60, "50 samples", [runner])
-        runner.send_signal(signal.SIGSTOP)
-        try:
-            seen = len(obs.ff)
-            obs.spin_until(lambda: len(obs.ff) >= seen + 250, 60, "250 samples on")
-        finally:
-            runner.send_signal(signal.SIGCONT)
-        obs.spin_for(0.3)
-        newest = max(obs.ff) // T_NS  # a nominal torque: up to LOOKAHEAD past its joint state
-        t0 = time.monotonic()
-        runner.send_signal(signal.SIGINT)
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            runner.wait(15)
-        took = time.monotonic() - t0
-        stderr = err_path.read_text(errors="replace")
-        said = re.search(r"the recorder holds (\d+) samples of the run but ([^;]*);", stderr)
-        report(
-            "runner stopped while the run went on, then SIGINT",
-            took_s=took,
-            returncode=runner.returncode,
-            newest=newest,
-            said=said.group(0) if said else None,
-        )
-        assert runner.returncode == 1 and "interrupted" in stderr, stderr[-2000:]
-        assert took <= 2.0 + (RESEND_WAIT_S if said else 0.0), stderr[-3000:]
-        wanted = int(said.group(1)) if said else newest + 1 - wire.MAX_LOOKAHEAD
-        assert wanted >= seen + 250 - wire.MAX_LOOKAHEAD, (wanted, seen)
-        for topic in PER_SAMPLE_TOPICS:
-            stamps = {
-                wire.stamp_to_ns(m.decode().header.stamp)
-                for m in read_messages(out / "lost.mcap", topics=[f"/{topic}"])
-            }
-            missing = sorted(k for k in range(wanted) if k * T_NS not in stamps)
-            assert not missing, (topic, missing[:5], len(missing), wanted)
-    finally:
-        obs.close()
-        if runner.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(runner.pid, signal.SIGCONT)
-            runner.kill()
-            runner.wait(5)
-        if process_group(runner.pid):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(runner.pid, signal.SIGKILL)
 
 
 # ----------------------------------------------------------------------------------------------
