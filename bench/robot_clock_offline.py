@@ -22,7 +22,8 @@ far the command moves from one sample to the next in the hold after the move, th
 worst joint's mean |u(k) - u(k-1)| (N m). About three minutes on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--no-armature] [--alpha-model A] [--json FILE]
+        [--ideal-velocity] [--no-armature] [--alpha-model A] [--set NAME=VALUE ...]
+        [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
@@ -30,7 +31,10 @@ point only, ``adaptive.relinearize: false``) instead of one that follows the set
 ``robot_sim`` does by default), instead of positions only. The controllers of a physical arm
 are told its rotor inertia (the controller nodes' ``armature``), as the wall-time benchmark's
 are (:func:`apc_lab.robot_compare.controller_armature`); ``--no-armature``: not told.
-``--alpha-model A``: the recommended preset with ``alpha_model`` A.
+``--alpha-model A``: the recommended preset with ``alpha_model`` A (``--set alpha_model=A``).
+``--set NAME=VALUE`` (repeatable): the recommended preset with its setting NAME VALUE (a number,
+an integer or a boolean as the preset's own value is; a later one wins), to measure a candidate
+change of the preset on the whole grid; the JSON records them (``settings_overrides``).
 """
 
 from __future__ import annotations
@@ -235,44 +239,94 @@ def markdown(
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
-    parser.add_argument("--json", type=Path, help="write the cells here")
-    parser.add_argument(
+def setting(text: str) -> tuple[str, bool | int | float]:
+    """``NAME=VALUE`` of ``--set``: a setting of :func:`recommended_settings` and its value,
+    parsed as the preset's own value is (a boolean, an integer or a number). An unknown name or
+    a value that does not parse is an :class:`argparse.ArgumentTypeError` saying which."""
+    name, sep, value = text.partition("=")
+    name, value = name.strip(), value.strip()
+    preset = recommended_settings()
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    if name not in preset:
+        raise argparse.ArgumentTypeError(
+            f"unknown setting {name!r}: one of {', '.join(sorted(preset))}"
+        )
+    default = preset[name]
+    if isinstance(default, bool):
+        words = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+        if value.lower() not in words:
+            raise argparse.ArgumentTypeError(f"setting {name!r}: not a boolean: {value!r}")
+        return name, words[value.lower()]
+    try:
+        return name, int(value) if isinstance(default, int) else float(value)
+    except ValueError:
+        kind = "an integer" if isinstance(default, int) else "a number"
+        raise argparse.ArgumentTypeError(f"setting {name!r}: not {kind}: {value!r}") from None
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line. ``--set``, ``--alpha-model`` and ``--no-relinearize`` all append to
+    ``set``, the overrides of the preset's settings in the order given."""
+    cli = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    cli.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    cli.add_argument("--json", type=Path, help="write the cells here")
+    cli.add_argument(
         "--no-relinearize",
-        action="store_true",
+        dest="set",
+        action="append_const",
+        const=("relinearize", False),
         help="the recommended preset with the paper's prior (Eq. 33 at the first set point)",
     )
-    parser.add_argument(
+    cli.add_argument(
         "--ideal-velocity",
         action="store_true",
         help="the ideal arm's states carry its exact velocity (a driver that publishes one)",
     )
-    parser.add_argument(
+    cli.add_argument(
         "--no-armature",
         action="store_true",
         help="the controllers' model of a physical arm lacks its rotor inertia",
     )
-    parser.add_argument("--alpha-model", type=float, help="the preset's alpha_model instead")
-    args = parser.parse_args()
-    settings = None
-    if args.no_relinearize or args.alpha_model is not None:
-        settings = dict(recommended_settings())
-        if args.no_relinearize:
-            settings["relinearize"] = False
-        if args.alpha_model is not None:
-            settings["alpha_model"] = args.alpha_model
+    cli.add_argument(
+        "--alpha-model",
+        dest="set",
+        action="append",
+        type=lambda value: setting(f"alpha_model={value}"),
+        metavar="A",
+        help="the preset's alpha_model instead (--set alpha_model=A)",
+    )
+    cli.add_argument(
+        "--set",
+        dest="set",
+        action="append",
+        type=setting,
+        metavar="NAME=VALUE",
+        help="the preset's setting NAME instead (repeatable; a later one wins)",
+    )
+    return cli
+
+
+def overrides(args: argparse.Namespace) -> dict[str, bool | int | float]:
+    """The preset's settings the command line changes, the last given of each name winning."""
+    return dict(args.set or ())
+
+
+def main() -> None:
+    args = parser().parse_args()
+    changed = overrides(args)
+    settings = {**recommended_settings(), **changed} if changed else None
     cells = measure(tuple(args.arms), settings, args.ideal_velocity, not args.no_armature)
     print()
     print(markdown(cells), end="")
     if args.json:
         doc = {
             "simulated_time": True,
-            "relinearize": not args.no_relinearize,
+            "relinearize": (settings or recommended_settings())["relinearize"],
             "ideal_velocity": args.ideal_velocity,
             "armature": not args.no_armature,
-            "alpha_model": args.alpha_model,
+            "alpha_model": changed.get("alpha_model"),
+            "settings_overrides": changed,
             "cells": cells,
         }
         args.json.write_text(json.dumps(doc, indent=1) + "\n")

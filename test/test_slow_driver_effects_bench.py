@@ -7,6 +7,7 @@ time, and the delay and velocity stencil a ``told`` law receives in place of rob
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import sys
 from pathlib import Path
@@ -103,3 +104,28 @@ def test_a_cell_counts_a_run_that_blew_up_as_lost(sde):
         assert cell["chatter_nm"] == float("inf")
         assert cell["lost"] == 1 and cell["runs"] == 3 and cell["handover_runs"] == 1
         assert cell["median_max_deg"] == 0.3
+
+
+def test_the_grid_overrides_the_presets_settings_as_their_own_types(sde):
+    """``robot_clock_offline``'s ``--set NAME=VALUE`` (shared ``--alpha-model`` and
+    ``--no-relinearize``): each value parsed as the preset's own is, a later one winning; an
+    unknown name or a value of the wrong kind is an argparse error naming it."""
+    import robot_clock_offline as rco
+
+    parse = rco.parser().parse_args
+    assert rco.overrides(parse([])) == {}
+    argv = ["--set", "r=3e-6", "--alpha-model", "1e-3", "--set", "horizon=4", "--no-relinearize"]
+    changed = rco.overrides(parse([*argv, "--set", "project_g=false", "--set", "r=1e-5"]))
+    assert changed == {
+        "r": 1e-5,
+        "alpha_model": 1e-3,
+        "horizon": 4,
+        "relinearize": False,
+        "project_g": False,
+    }
+    assert type(changed["horizon"]) is int and type(changed["r"]) is float
+    for bad, says in (("foo=1", "'foo'"), ("horizon=2.5", "'horizon'"), ("rho", "NAME=VALUE")):
+        with pytest.raises(SystemExit):
+            parse(["--set", bad])
+        with pytest.raises(argparse.ArgumentTypeError, match=says):
+            rco.setting(bad)
