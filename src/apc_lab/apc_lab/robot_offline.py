@@ -87,8 +87,8 @@ class RobotRun:
     """One run: the start position; per driver cycle (time ns, q), with the set point's q
     appended for the cycles whose state was a sample; the loop's timing figures at the end
     (:meth:`apc_feedback.sample_timing.SampleTiming.figures`, us), its counters, its logged
-    lines ``(level, text)``, the commands it sent ``(time ns, torque in the driver's order)``
-    and when it was activated (ns)."""
+    lines ``(level, text)``, the commands it sent ``(time ns, torque in the driver's order)``,
+    when it was activated (ns) and the controllers' sampling period T (ns)."""
 
     q0: np.ndarray
     log: list[tuple]
@@ -97,6 +97,7 @@ class RobotRun:
     lines: list[tuple[str, str]] = field(default_factory=list)
     commands: list[tuple[int, np.ndarray]] = field(default_factory=list)
     activated_ns: int = 0
+    period_ns: int = 0
 
     @property
     def q(self) -> np.ndarray:
@@ -109,6 +110,17 @@ class RobotRun:
     def tracking_error_deg(self) -> np.ndarray:
         """|q - q_d| at each sample, per joint, deg: shape (samples, n)."""
         return np.array([np.rad2deg(np.abs(e[1] - e[2])) for e in self.log if len(e) == 3])
+
+    def tracking_error_at_deg(self, at_s: float) -> np.ndarray:
+        """|q - q_d| per joint (deg) at the sample for ``at_s`` s after activation: the last
+        sample whose state is stamped within half a period after that time (a state comes a
+        fraction of its driver's cycle after its sample's grid time), as the wall-time bench's
+        error at the move's end (``apc_lab.wall_clock``)."""
+        until = self.activated_ns + round(at_s * 1e9) + self.period_ns // 2
+        rows = [e for e in self.log if len(e) == 3 and e[0] <= until]
+        if not rows:
+            raise ValueError(f"no sample within {at_s} s of activation")
+        return np.rad2deg(np.abs(rows[-1][1] - rows[-1][2]))
 
     def max_tracking_error_deg(self) -> float:
         """Largest |q - q_d| at the samples, deg."""
@@ -336,4 +348,4 @@ def run_robot_loop(
                 loop.activate()
             handle(loop.tick(now), now)
             heapq.heappush(events, (now + T_NS, WATCHDOG, next(order), None))
-    return RobotRun(q0, log, loop.timing.figures(), counts, lines, commands, t_act)
+    return RobotRun(q0, log, loop.timing.figures(), counts, lines, commands, t_act, T_NS)
