@@ -87,7 +87,8 @@ def one_run(
     setup: Callable[[RobotLoop], object] | None = None,
     armature: bool = True,
 ) -> dict:
-    """Run ``index`` of a cell: max and final error per joint (deg), hand-overs.
+    """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
+    joint (deg), hand-overs, the commands' chatter in the hold (N m).
 
     ``effects``: one of :data:`EFFECTS`, or the arm's effects themselves (in MuJoCo, as
     ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before

@@ -116,6 +116,8 @@ class RobotRun:
         sample whose state is stamped within half a period after that time (a state comes a
         fraction of its driver's cycle after its sample's grid time), as the wall-time bench's
         error at the move's end (``apc_lab.wall_clock``)."""
+        if self.period_ns <= 0:
+            raise ValueError("the run's sampling period (period_ns) is not known")
         until = self.activated_ns + round(at_s * 1e9) + self.period_ns // 2
         rows = [e for e in self.log if len(e) == 3 and e[0] <= until]
         if not rows:

@@ -3,9 +3,12 @@ what is on the wire before a run's writers go away.
 
 A reliable reader delivers a writer's samples in order: after a loss (a sample dropped on a
 loaded machine, or sent before the reader's side of the match) it holds back every later sample
-of that writer until the writer resends the lost one, which Fast DDS does when the writer's next
-heartbeat brings the reader's request for it (every :data:`HEARTBEAT_PERIOD_S`). A writer that
-has left resends nothing: the reader loses everything from the gap on.
+of that writer until the writer resends the lost one, which Fast DDS does once a heartbeat of
+the writer brings the reader's request for it: often within 0.1 s, at the latest at the
+writer's periodic heartbeat (every :data:`HEARTBEAT_PERIOD_S`). A writer that has left resends
+nothing: the reader loses everything from the gap on. A writer resends only what its history
+still holds (``apc_msgs_py.CONTROL_WRITER_DEPTH`` samples): a lockstep run that goes on for a
+heartbeat may have run further than that past a lost sample, which is then gone for good.
 """
 
 from __future__ import annotations
@@ -73,8 +76,8 @@ def drain(
     """Let the recorder take what is still queued once the plant has finished: at least
     ``least_s`` (the plant's final /diagnostics), and up to ``most_s`` until it holds every
     sample 0..``n_samples`` of the per-sample topics (a recorder that lagged behind a fast
-    lockstep run catches up instead of the file losing its tail; a lost sample comes back with
-    the writer's next heartbeat)."""
+    lockstep run catches up instead of the file losing its tail; a sample lost on its way comes
+    back at a heartbeat of its writer, while the writer is still there)."""
     names = [recorder.resolve_topic_name(t) for t in PER_SAMPLE_TOPICS]
     t0 = time.monotonic()
     while True:
@@ -96,7 +99,7 @@ def wait_for_resends(
 ) -> bool:
     """After a signal, before the nodes (other processes) are stopped: wait, while
     ``plant_running()`` and at most ``most_s``, until the recorder holds every per-sample topic
-    up to the newest sample that it holds, or holds an answer to, at the signal, or the
+    up to the newest joint state that it holds, or holds an answer to, at the signal, or the
     ``published`` samples the plant's clock says it had (``/clock`` is best effort: no loss holds
     it back). Whether it waited past ``quiet_s`` (and said so on stderr).
 
@@ -105,19 +108,18 @@ def wait_for_resends(
     later sample of that writer back: the writer must live until its next heartbeat to resend
     it, or the recording ends at the gap (a plant stopped at once took joint states 22-107 of a
     run with it, in another run all of them). The run goes on meanwhile; the recording holds
-    every sample up to the signal and a few after it.
+    every sample up to the signal, and more after it, unless a lockstep run outran the writers'
+    history (module docstring). The feedforward's messages are no evidence: it sends again what
+    it sent for a joint state the plant resends.
     """
     names = [recorder.resolve_topic_name(t) for t in PER_SAMPLE_TOPICS]
     count = recorder.counts.get
-    # Each answer to joint state k says the plant published it: a torque or estimate k from
-    # the feedback, a set point or nominal torque up to k + lookahead from the feedforward.
-    ahead = [recorder.resolve_topic_name(t) for t in (wire.SETPOINT, wire.FEEDFORWARD_TORQUE)]
+    # The feedback's torque or estimate k answers joint state k: the plant published it.
     answers = [recorder.resolve_topic_name(t) for t in (wire.FEEDBACK_TORQUE, wire.ESTIMATE)]
     wanted = max(
         published,
         count(recorder.resolve_topic_name(wire.JOINT_STATES), 0),
         *(count(name, 0) for name in answers),
-        *(count(name, 0) - wire.MAX_LOOKAHEAD for name in ahead),
     )
 
     def short() -> list[str]:
@@ -132,7 +134,7 @@ def wait_for_resends(
         if waited >= quiet_s and not said:
             have = ", ".join(f"{n} {count(n, 0)}" for n in missing)
             print(
-                f"experiment: the recorder holds {wanted} samples of the run but {have}; "
+                f"experiment: the run is at sample {wanted}, the recorder's {have}; "
                 f"keeping the run up to {most_s:.1f} s for their writers to resend them",
                 file=sys.stderr,
                 flush=True,

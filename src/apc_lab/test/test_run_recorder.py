@@ -51,8 +51,8 @@ def test_a_recorder_that_holds_every_sample_does_not_wait(capsys):
 
 
 def test_a_feedforward_ahead_is_not_a_loss():
-    """Set points up to MAX_LOOKAHEAD samples ahead of the plant's last joint state."""
-    ahead = 40 + wire.MAX_LOOKAHEAD
+    """Set points ahead of the plant's last joint state, or sent again for a resent one."""
+    ahead = 40 + 3 * wire.MAX_LOOKAHEAD
     recorder = Recorder(
         JOINT_STATES=40, FEEDBACK_TORQUE=40, SETPOINT=ahead, FEEDFORWARD_TORQUE=ahead
     )
@@ -77,7 +77,7 @@ def test_the_wait_lasts_until_every_topic_holds_the_newest_answered_sample(capsy
     assert all(recorder.counts[f"/{t}"] >= 427 for t in PER_SAMPLE_TOPICS)
     assert executor.calls == 5 - 1 + 427 - 85
     err = capsys.readouterr().err
-    assert "holds 427 samples of the run but /joint_states 85, /feedback/torque 85" in err
+    assert "at sample 427, the recorder's /joint_states 85, /feedback/torque 85" in err
 
 
 def test_the_wait_ends_with_the_plant_or_at_its_limit():
@@ -89,3 +89,15 @@ def test_the_wait_ends_with_the_plant_or_at_its_limit():
     executor = Wire(recorder, {STATES}, resend_after=None)
     wait_for_resends(executor, recorder, lambda: True, most_s=0.0, quiet_s=10.0)
     assert executor.calls == 0
+
+
+def test_the_plants_clock_says_how_far_the_run_is_when_no_answer_does(capsys):
+    """Joint states and every answer stalled at 85 (all lost behind one gap), the plant's
+    ``/clock`` at sample 300: the wait lasts until they are resent up to 300."""
+    recorder = Recorder(
+        JOINT_STATES=85, FEEDBACK_TORQUE=85, ESTIMATE=85, SETPOINT=86, FEEDFORWARD_TORQUE=86
+    )
+    executor = Wire(recorder, {STATES, FB, ESTIMATE}, resend_after=3)
+    assert wait_for_resends(executor, recorder, lambda: True, published=300, quiet_s=0.0)
+    assert recorder.counts[STATES] == 300 and recorder.counts[FB] == 300
+    assert "at sample 300" in capsys.readouterr().err
