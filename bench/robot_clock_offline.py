@@ -63,10 +63,6 @@ PAYLOAD_FACTORS = (1.0, 0.99, 0.995, 1.005, 1.01)
 #: is measured: the worst joint's mean |u(k) - u(k-1)| (N m), docs/robot.md, "Commands that
 #: chatter".
 CHATTER_FROM_S = 1.4
-#: The move's end, after activation: its 0.2 s hold and its 1.0 s (run_robot_loop's 4-3-4);
-#: the error there is the wall-time bench's "final" (``apc_lab.wall_clock``), the grid's
-#: ``final_deg`` the error at the run's end, 1.3 s into the hold.
-MOVE_END_S = 1.2
 #: law label -> supervisor (None: the adaptive law alone).
 LAWS: dict[str, SupervisorConfig | None] = {
     "adaptive alone": None,
@@ -123,7 +119,8 @@ def one_run(
     errors = run.tracking_error_deg()
     return {
         "max_deg": errors.max(axis=0).round(3).tolist(),
-        "move_end_deg": run.tracking_error_at_deg(MOVE_END_S).round(3).tolist(),
+        # The wall-time bench's "final" error; final_deg is the run's end, 1.3 s into the hold.
+        "move_end_deg": run.tracking_error_at_move_end_deg().round(3).tolist(),
         "final_deg": errors[-1].round(3).tolist(),
         "handovers": run.counts.get("supervisor.handovers", 0),
         "chatter_nm": round(float(np.nanmax(run.command_chatter_nm(CHATTER_FROM_S))), 2),

@@ -774,11 +774,12 @@ def test_a_burst_of_late_commands_from_activation_is_told_and_then_what_the_driv
 
 
 def test_a_runs_error_at_a_time_is_at_the_sample_whose_state_comes_then():
-    """``RobotRun.tracking_error_at_deg``: the error at the sample for a time after activation
-    (the offline grid's ``move_end_deg``, the wall-time bench's final error), whose state is
-    stamped a fraction of a driver cycle after the sample's grid time; driver cycles that were
-    no sample do not count. The ideal Panda at 100 Hz ends its move 0.22 deg off on joint 5,
-    as on wall time (0.23), and holds within 0.02 deg 1.3 s later (0.01)."""
+    """``RobotRun.tracking_error_at_deg``: the error at the sample for a time after activation,
+    whose state is stamped a fraction of a driver cycle after the sample's grid time; driver
+    cycles that were no sample do not count. At the move's end
+    (``tracking_error_at_move_end_deg``) it is the offline grid's ``move_end_deg``, the
+    wall-time bench's final error. The ideal Panda at 100 Hz ends its move 0.22 deg off on
+    joint 5, as on wall time (0.23), and holds within 0.02 deg 1.3 s later (0.01)."""
     from apc_lab.robot_offline import RobotRun
 
     s, T = 1_000_000_000, 10_000_000
@@ -803,7 +804,13 @@ def test_a_runs_error_at_a_time_is_at_the_sample_whose_state_comes_then():
         2.5, goal_deg=arm.q_goal_deg, driver_ms=10.0, phase_ms=3.7, payload_kg=arm.payload_kg,
         arm=arm,
     )  # fmt: skip
-    assert 0.2 < ideal.tracking_error_at_deg(1.2)[4] < 0.25
+    assert 0.2 < ideal.tracking_error_at_move_end_deg()[4] < 0.25
+    # The move ends 1.2 s after activation (its 0.2 s hold and 1.0 s from the first sample).
+    assert (ideal.tracking_error_at_deg(1.2) == ideal.tracking_error_at_move_end_deg()).all()
+    with pytest.raises(ValueError, match="no move"):
+        RobotRun(
+            np.zeros(2), log, activated_ns=50 * s, period_ns=T
+        ).tracking_error_at_move_end_deg()
     assert ideal.tracking_error_deg()[-1].max() < 0.02
 
 

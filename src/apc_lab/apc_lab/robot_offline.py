@@ -88,7 +88,8 @@ class RobotRun:
     appended for the cycles whose state was a sample; the loop's timing figures at the end
     (:meth:`apc_feedback.sample_timing.SampleTiming.figures`, us), its counters, its logged
     lines ``(level, text)``, the commands it sent ``(time ns, torque in the driver's order)``,
-    when it was activated (ns) and the controllers' sampling period T (ns)."""
+    when it was activated (ns), the controllers' sampling period T (ns) and the grid time of
+    the move's end (ns; None without a move)."""
 
     q0: np.ndarray
     log: list[tuple]
@@ -98,6 +99,7 @@ class RobotRun:
     commands: list[tuple[int, np.ndarray]] = field(default_factory=list)
     activated_ns: int = 0
     period_ns: int = 0
+    move_end_ns: int | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -114,14 +116,25 @@ class RobotRun:
     def tracking_error_at_deg(self, at_s: float) -> np.ndarray:
         """|q - q_d| per joint (deg) at the sample for ``at_s`` s after activation: the last
         sample whose state is stamped within half a period after that time (a state comes a
-        fraction of its driver's cycle after its sample's grid time), as the wall-time bench's
-        error at the move's end (``apc_lab.wall_clock``)."""
+        fraction of its driver's cycle after its sample's grid time)."""
+        return self._tracking_error_at_ns(self.activated_ns + round(at_s * 1e9))
+
+    def tracking_error_at_move_end_deg(self) -> np.ndarray:
+        """|q - q_d| per joint (deg) at the sample of the move's end, as the wall-time bench's
+        final error (``apc_lab.wall_clock``)."""
+        if self.move_end_ns is None:
+            raise ValueError("the run has no move")
+        return self._tracking_error_at_ns(self.move_end_ns)
+
+    def _tracking_error_at_ns(self, time_ns: int) -> np.ndarray:
         if self.period_ns <= 0:
             raise ValueError("the run's sampling period (period_ns) is not known")
-        until = self.activated_ns + round(at_s * 1e9) + self.period_ns // 2
+        until = time_ns + self.period_ns // 2
         rows = [e for e in self.log if len(e) == 3 and e[0] <= until]
         if not rows:
-            raise ValueError(f"no sample within {at_s} s of activation")
+            raise ValueError(
+                f"no sample by {(time_ns - self.activated_ns) * 1e-9} s after activation"
+            )
         return np.rad2deg(np.abs(rows[-1][1] - rows[-1][2]))
 
     def max_tracking_error_deg(self) -> float:
@@ -286,9 +299,10 @@ def run_robot_loop(
     commands: list[tuple[int, np.ndarray]] = []
     # Before activation the brakes hold the arm (the driver has no command yet).
     moved = goal_deg is None
+    move_end_ns: int | None = None
 
     def handle(step: Step, now: int) -> None:
-        nonlocal moved
+        nonlocal moved, move_end_ns
         if step.command is not None:
             # It reaches the driver after its latency; the driver applies the newest arrival at
             # its first cycle after that (a cycle at the same instant has already run).
@@ -304,6 +318,7 @@ def run_robot_loop(
             start = step.setpoint.q
             move = FourThreeFour(start, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
             plan.set_trajectory(move, step.setpoint.k + round(hold_s / T))
+            move_end_ns = plan.end_k() * T_NS
             moved = True
 
     # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
@@ -350,4 +365,6 @@ def run_robot_loop(
                 loop.activate()
             handle(loop.tick(now), now)
             heapq.heappush(events, (now + T_NS, WATCHDOG, next(order), None))
-    return RobotRun(q0, log, loop.timing.figures(), counts, lines, commands, t_act, T_NS)
+    return RobotRun(
+        q0, log, loop.timing.figures(), counts, lines, commands, t_act, T_NS, move_end_ns
+    )
