@@ -23,7 +23,8 @@ import numpy as np
 import pinocchio as pin
 
 from apc_core.params import check_settings, setting, settings_from
-from apc_feedback.controller import FeedbackError, FeedbackLaw, FeedbackOutput
+from apc_feedback.adaptive_config import FeedbackError
+from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 
 
 @dataclass(frozen=True)

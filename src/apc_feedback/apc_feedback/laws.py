@@ -18,7 +18,8 @@ from typing import Any
 from apc_core.params import ConfigError, Param, params_from, subset
 from apc_core.robot import Robot
 from apc_feedback.baselines import PD, PID, ComputedTorque, NoFeedback, PdGains, PidGains
-from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback, FeedbackError
+from apc_feedback.feedback_law import FeedbackLaw
 
 
 @dataclass(frozen=True)

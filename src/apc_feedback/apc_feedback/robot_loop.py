@@ -71,8 +71,8 @@ import numpy as np
 from apc_feedback.arrays import all_true, any_true
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.command_map import CommandMap
-from apc_feedback.controller import FeedbackLaw, FeedbackOutput
 from apc_feedback.delay_telling import DelayTelling
+from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
 from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
 from apc_feedback.sample_timing import SampleTiming

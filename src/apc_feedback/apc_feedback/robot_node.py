@@ -93,7 +93,8 @@ from apc_core.nodeutil import (
 from apc_core.params import ConfigError, Param, declare, params_from, subset
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.command_map import CommandMap
-from apc_feedback.controller import AdaptiveFeedback, FeedbackError, FeedbackLaw
+from apc_feedback.controller import AdaptiveFeedback, FeedbackError
+from apc_feedback.feedback_law import FeedbackLaw
 from apc_feedback.lagged_control import input_change_cap
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows

@@ -76,7 +76,7 @@ from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Robot
 from apc_feedback.arrays import any_true
 from apc_feedback.baselines import PdGains
-from apc_feedback.controller import FeedbackLaw
+from apc_feedback.feedback_law import FeedbackLaw
 from apc_feedback.laws import make_law
 
 #: The triggers, in the order they are checked; each is counted as ``supervisor.<trigger>``.

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from apc_core.robot import Robot
-from apc_feedback.controller import FeedbackLaw
+from apc_feedback.feedback_law import FeedbackLaw
 from apc_feedforward.nominal import Feedforward
 from apc_plant_sim.plant import Plant
 

@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from apc_feedback.controller import FeedbackLaw, FeedbackOutput
+from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedforward.nominal import Feedforward
 from apc_lab.offline import run_closed_loop
 from apc_lab.scenario import (
