@@ -29,7 +29,7 @@ The figures come from the processes' records by :mod:`apc_lab.loop_timing`; this
 the processes and collects the records.
 
     .venv/bin/python bench/robot_loop.py [--seconds 10] [--runs 3] [--quick]
-        [--controller adaptive] [--no-write]
+        [--controller adaptive] [--command-first] [--no-write]
 """
 
 from __future__ import annotations
@@ -81,9 +81,16 @@ def write_robot_sim_params(path: Path) -> None:
 class RobotRun:
     """The processes of one run: robot_sim, then robot_node."""
 
-    def __init__(self, workdir: Path, tag: str, layout: str, controller: str = CONTROLLER) -> None:
+    def __init__(
+        self,
+        workdir: Path,
+        tag: str,
+        layout: str,
+        controller: str = CONTROLLER,
+        command_first: bool = False,
+    ) -> None:
         self.workdir, self.tag, self.layout = workdir, tag, layout
-        self.controller = controller
+        self.controller, self.command_first = controller, command_first
         self.sim_params = workdir / f"{tag}.robot_sim.yaml"
         write_robot_sim_params(self.sim_params)
         self.started_file = workdir / f"{tag}.started"
@@ -104,6 +111,7 @@ class RobotRun:
     def start(self) -> None:
         self._spawn("robot_sim", self.sim_params, "--started", str(self.started_file))
         args = ["-p", f"period:={1.0 / RATE_HZ}", "-p", f"robot_node:controller:={self.controller}"]
+        args += ["-p", f"command_first:={str(self.command_first).lower()}"]
         args += ["--activation-phase", str(LAYOUTS[self.layout])]
         self._spawn("robot_node", CONTROLLERS_FILE, *args)
 
@@ -150,11 +158,12 @@ def measure(
     warmup_s: float,
     runs: int = 1,
     controller: str = CONTROLLER,
+    command_first: bool = False,
 ) -> dict[str, Any]:
     samples = []
     account = benchlib.CpuAccount()
     for i in range(runs):
-        run = RobotRun(workdir, f"robot_{layout}_{i}", layout, controller)
+        run = RobotRun(workdir, f"robot_{layout}_{i}", layout, controller, command_first)
         run.run(seconds + warmup_s + 0.2)
         samples.append(
             run_samples(run.result("robot_sim"), run.result("robot_node"), warmup_s, seconds)
@@ -179,6 +188,7 @@ def run(
     seconds: float | None = None,
     runs: int | None = None,
     controller: str = CONTROLLER,
+    command_first: bool = False,
 ) -> dict[str, Any]:
     benchlib.isolate_dds()
     seconds = seconds if seconds is not None else (3.0 if quick else 10.0)
@@ -187,12 +197,15 @@ def run(
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="apc_bench_") as tmp:
         for layout in LAYOUTS:
-            out[layout] = measure(Path(tmp), layout, seconds, warmup_s, runs, controller)
+            out[layout] = measure(
+                Path(tmp), layout, seconds, warmup_s, runs, controller, command_first
+            )
     out["settings"] = {
         "robot": "robot_sim, engine pinocchio, wall time, state_rate 1000 Hz, 3-joint PUMA 560, "
         "2.268 kg at wrist_center, holding q = [0, -45, -45] deg",
         "controllers": "robot_node with config/puma560_3dof_robot.yaml, period 0.001 s, "
-        f"controller {controller}, preset recommended; robot_sim in its own process",
+        f"controller {controller}, preset recommended, command_first {command_first}; "
+        "robot_sim in its own process",
         "layouts": "robot_node activated at "
         + ", ".join(f"{k} {1e3 * v:g} ms" for k, v in LAYOUTS.items())
         + " after a joint state's stamp (samples are taken on arrival)",
@@ -212,11 +225,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=CONTROLLER,
         help=f"robot_node's controller (default {CONTROLLER}; e.g. computed_torque)",
     )
+    parser.add_argument(
+        "--command-first",
+        action="store_true",
+        help="robot_node's command_first: the command from the gain planned the sample before",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     benchlib.emit(
-        run(args.quick, args.seconds, args.runs, args.controller),
+        run(args.quick, args.seconds, args.runs, args.controller, args.command_first),
         "robot_loop",
         t0,
         write=not args.no_write,

@@ -339,14 +339,24 @@ def test_closed_loop_timing_figures():
 
 
 @pytest.mark.parametrize(
-    ("period_ms", "driver_ms", "late_periods"),
-    [(1.0, 1.0, 0.0), (1.0, 1.0, 1.0), (2.0, 1.0, 1.0), (5.0, 1.0, 0.5), (10.0, 2.0, 0.0)],
+    ("period_ms", "driver_ms", "late_periods", "command_first"),
+    [
+        (1.0, 1.0, 0.0, False),
+        (1.0, 1.0, 1.0, False),
+        (1.0, 1.0, 1.0, True),
+        (2.0, 1.0, 1.0, False),
+        (5.0, 1.0, 0.5, False),
+        (10.0, 2.0, 0.0, False),
+    ],
 )
-def test_the_recommended_preset_carries_over_sampling_periods(period_ms, driver_ms, late_periods):
+def test_the_recommended_preset_carries_over_sampling_periods(
+    period_ms, driver_ms, late_periods, command_first
+):
     """The preset's weights are per sample and its horizon three samples, set at T = 10 ms: at
     T = 1-10 ms, with commands up to a period late beyond the driver's next cycle, the paper's
-    move tracks within 0.5 deg (simulated time). A horizon stated in time (30 ms) tracks
-    better at 1 ms but costs ten times the Riccati steps per sample."""
+    move tracks within 0.5 deg (simulated time), at 1 ms also with ``command_first``. A
+    horizon stated in time (30 ms) tracks better at 1 ms but costs ten times the Riccati steps
+    per sample."""
     run = run_robot_loop(
         2.0,
         goal_deg=PAPER_GOAL_DEG,
@@ -355,6 +365,7 @@ def test_the_recommended_preset_carries_over_sampling_periods(period_ms, driver_
         phase_ms=0.3 * driver_ms,
         transport_ms=0.3 * driver_ms,
         latency=Latency(fixed_ms=late_periods * period_ms),
+        command_first=command_first,
     )
     assert run.counts["samples_taken"] == round(2000.0 / period_ms)
     assert run.max_tracking_error_deg() < 0.5
@@ -836,3 +847,43 @@ def test_a_runs_chatter_is_the_mean_change_of_its_commands_from_a_time_on():
     assert physical_panda_move(2.5, 4.0).command_chatter_nm(1.4).max() > 10.0
     ideal = physical_panda_move(2.5, 4.0, effects=ArmEffects(), armature=None)
     assert ideal.command_chatter_nm(1.4).max() < 0.5
+
+
+def test_command_first_learns_once_the_command_has_left():
+    """With ``command_first`` the adaptive law's sample returns its command with its learning
+    left undone, and the loop's ``command_published`` (the node calls it after the publish)
+    does it: never later than the next state."""
+    events: list[str] = []
+    publishing: list[bool] = []
+
+    def setup(loop: RobotLoop) -> None:
+        law, on_state, published = loop.law, loop.on_joint_state, loop.command_published
+        settle = law.settle
+
+        def on_joint_state(state, now_ns):
+            step = on_state(state, now_ns)
+            if step.command is not None:
+                events.append("command, learning left" if law._pending else "command")
+            return step
+
+        def command_published(now_ns):
+            events.append("published")
+            publishing.append(True)
+            published(now_ns)
+            publishing.clear()
+
+        def traced_settle():
+            if law._pending is not None:
+                events.append("learnt" if publishing else "learnt at the next state")
+            settle()
+
+        loop.on_joint_state, loop.command_published = on_joint_state, command_published
+        law.settle = traced_settle
+        loop._settle = traced_settle
+
+    run_robot_loop(0.3, period_ms=1.0, driver_ms=1.0, command_first=True, setup=setup)
+    assert events.count("command, learning left") > 250
+    assert "learnt at the next state" not in events
+    for i, event in enumerate(events):
+        if event == "command, learning left":
+            assert events[i + 1 : i + 3] == ["published", "learnt"]

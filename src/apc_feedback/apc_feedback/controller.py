@@ -13,6 +13,7 @@ import dataclasses
 import math
 from collections import deque
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -55,6 +56,19 @@ RELATIVE_GAIN_FLOOR = 0.1
 RELINEARIZE_PERIOD_S = 0.01
 
 
+class _Pending(NamedTuple):
+    """What an update with ``defer_learning`` leaves for :meth:`AdaptiveFeedback.settle`
+    (``dx`` None: the update identified itself, only the gain is planned)."""
+
+    k: int
+    dx: np.ndarray | None
+    identify: bool
+    follow: bool
+    q_d: np.ndarray
+    qd_d: np.ndarray
+    u_n: np.ndarray
+
+
 class AdaptiveFeedback(FeedbackLaw):
     """Adaptive perturbation control (Eqs. 16, 29-35).
 
@@ -73,6 +87,14 @@ class AdaptiveFeedback(FeedbackLaw):
     switched on: a receding horizon of N steps (``horizon``) and integral action on the
     position error (``q_integral``), which augments the identified model with
     ``ξ(k+1) = ξ(k) + T C (F̂ dx + Ĝ du + ŵ)`` (C selects the position rows).
+
+    ``defer_learning`` (robot mode's ``command_first``; off: the paper's order): with a receding
+    plan ``du(k)`` is the gain planned after sample ``k-1`` on the state at ``k``; the step to
+    ``k``, the prior's move and the next plan wait for :meth:`settle` (the caller's, once the
+    command has left; else the next update's). Åström and Wittenmark's order
+    (*Computer-Controlled Systems*, on implementation: the output right after the input, what
+    the next sample needs after it), for a model one sample older. A (re)start or new weights
+    plan first; the output reports the step taken after the last command.
 
     Parameters
     ----------
@@ -99,6 +121,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self.input_timing = InputTiming(config.input_delay)
         # (k, δu) another law sent while this one was idle: on their way at its next start.
         self._observed: deque[tuple[int, np.ndarray]] = deque(maxlen=MAX_INPUT_LAGS + 1)
+        #: Send each command first, learn after it (:meth:`settle`); see the class docstring.
+        self.defer_learning = False
         self._set_weights(config)
         self.reset()
 
@@ -127,6 +151,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self.input_change_weight = config.q_input_change
         self._next_ring_check: int | None = None  # the plan judged at the next sample
         self._identify_applied = config.identify_with == "applied"
+        self._gain: np.ndarray | None = None  # defer_learning: planned for the next sample
 
     @property
     def settings(self) -> AdaptiveConfig:
@@ -177,6 +202,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._u_n_prev = np.zeros(n)
         self.integral = np.zeros(n)
         self.input_change_weight, self._next_ring_check = self.config.q_input_change, None
+        self._gain, self._pending = None, None
+        self._settled: tuple[np.ndarray | None, float, bool] | None = None
 
     def update(
         self,
@@ -189,6 +216,8 @@ class AdaptiveFeedback(FeedbackLaw):
         u_n: np.ndarray,
         applied: np.ndarray | None,
     ) -> FeedbackOutput:
+        if self._pending is not None:
+            self.settle()  # the caller did not: the step after the last command, now
         dx = self._dx
         np.subtract(q, q_d, out=self._dx_q)
         np.subtract(qd, qd_d, out=self._dx_qd)
@@ -196,7 +225,7 @@ class AdaptiveFeedback(FeedbackLaw):
         if not math.isfinite(float(np.add.reduce(dx))):
             raise FeedbackError(f"state error is not finite at sample {k}")
         residual = None
-        rejected = skipped = False
+        rejected = skipped = identify = False
         stuck = self._stuck(qd)
         trace_p = float("nan")
         starting = not self._started
@@ -243,41 +272,92 @@ class AdaptiveFeedback(FeedbackLaw):
             skipped = True  # the inputs of a lag are not known yet (after a start or a gap)
             self.skipped_updates += 1
         else:
-            try:
-                before = (
-                    self._velocity_gain().diagonal().copy()
-                    if self.config.project_g and self._prior_model is not None
-                    else None
-                )
-                if self.input_timing.choice.active:
-                    self.input_timing.choice.score(dx, self._z[:-1], self.n_joints)
-                step = self.rls.update(self._z, dx)
-                residual, trace_p = step.residual, step.trace_p
-                if self.config.project_g and not self._g_physical(before):
-                    # Unphysical Ĝ: take the step back, keep the last physical estimate.
-                    self.rls.undo()
-                    self.projected_updates += 1
-                    trace_p = self.rls.trace_p
-            except RlsError:
-                # Keep controlling with the last good estimate; the node counts and reports it.
-                rejected = True
-                self.rejected_updates += 1
-        if self._prior_model is not None and not starting and k >= self._next_relinearize:
-            self._follow_setpoint(q_d, qd_d, u_n)
+            identify = True
+        follow = self._prior_model is not None and not starting and k >= self._next_relinearize
+        if follow:
             self._next_relinearize = k + self._relinearize_every
+        gain = self._gain
+        if gain is not None and not starting:  # defer_learning: the plan of the sample before
+            du = self._receding_control(dx, gain)
+            self._pending = _Pending(k, dx.copy(), identify, follow, q_d, qd_d, u_n)
+            if self._settled is not None:  # what the step after the last command gave
+                residual, trace_p, rejected = self._settled
+                self._settled = None
+        else:
+            if identify:
+                residual, trace_p, rejected = self._identify(dx)
+            if follow:
+                self._follow_setpoint(q_d, qd_d, u_n)
+            check = self._next_ring_check
+            if check is None:  # a (re)start or new weights: judged before this sample's command
+                self._damp_input_ringing(k, solved=False)
+            du = self._control(dx)
+            if check is not None and k >= check:  # this sample's plan; a raised weight next
+                self._damp_input_ringing(k, solved=True)
+            self._z_dx[:] = dx
+            if self.defer_learning and self._receding is not None:
+                self._pending = _Pending(k, None, False, False, q_d, qd_d, u_n)  # plan the gain
         if trace_p != trace_p:  # NaN: no accepted update this sample
             trace_p = self.rls.trace_p
-        check = self._next_ring_check
-        if check is None:  # a (re)start or new weights: judged before this sample's command
-            self._damp_input_ringing(k, solved=False)
-        du = self._control(dx)
-        if check is not None and k >= check:  # this sample's plan; a raised weight from the next
-            self._damp_input_ringing(k, solved=True)
-        self._z_dx[:] = dx
         self._du_prev = du
         self._u_n_prev[:] = u_n
         self._k_prev = k
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
+
+    def settle(self) -> None:
+        """With ``defer_learning``, once the last update's command has left: its identification
+        step, the prior's move and the plan of the next command's gain (none if it cannot be
+        solved: the next sample plans first and fails there, counted). Else nothing."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        if pending.dx is not None:
+            if pending.identify:
+                residual, trace_p, rejected = self._identify(pending.dx)
+                self._settled = residual, trace_p, rejected
+            if pending.follow:
+                self._follow_setpoint(pending.q_d, pending.qd_d, pending.u_n)
+            self._z_dx[:] = pending.dx
+        try:
+            self._gain = self._plan_gain(pending.k)
+        except ValueError:  # ControlError: R + BᵀPB not positive definite, a gain not finite
+            self._gain = None
+
+    def _identify(self, dx: np.ndarray) -> tuple[np.ndarray | None, float, bool]:
+        """One RLS step to ``dx`` from ``z``: residual, ``trace(P)`` (NaN: none), refused."""
+        residual, trace_p = None, float("nan")
+        try:
+            before = (
+                self._velocity_gain().diagonal().copy()
+                if self.config.project_g and self._prior_model is not None
+                else None
+            )
+            if self.input_timing.choice.active:
+                self.input_timing.choice.score(dx, self._z[:-1], self.n_joints)
+            step = self.rls.update(self._z, dx)
+            residual, trace_p = step.residual, step.trace_p
+            if self.config.project_g and not self._g_physical(before):
+                # Unphysical Ĝ: take the step back, keep the last physical estimate.
+                self.rls.undo()
+                self.projected_updates += 1
+                trace_p = self.rls.trace_p
+        except RlsError:
+            # Keep controlling with the last good estimate; the node counts and reports it.
+            self.rejected_updates += 1
+            return residual, trace_p, True
+        return residual, trace_p, False
+
+    def _plan_gain(self, k: int) -> np.ndarray:
+        """The plan's gain over ``(δx, δu on their way, ξ, 1)`` after sample ``k``, its input
+        ringing judged when due (a raised weight planned again)."""
+        gain = self._write_plan().gain()
+        check = self._next_ring_check
+        if check is not None and k >= check:
+            weight = self.input_change_weight
+            self._damp_input_ringing(k, solved=True)  # reuses the recursion gain() ran
+            if self.input_change_weight != weight:
+                gain = self._write_plan().gain()
+        return gain
 
     def _delay(self) -> float:
         """The delay ``Ĝ(0)`` is split by (none without lags)."""
@@ -423,24 +503,27 @@ class AdaptiveFeedback(FeedbackLaw):
             return self._one_step(self.rls.model_view(), dx)
         return self._receding_control(dx)
 
-    def _receding_control(self, dx: np.ndarray) -> np.ndarray:
+    def _receding_control(self, dx: np.ndarray, gain: np.ndarray | None = None) -> np.ndarray:
         """The receding-horizon control over ``(δx(k), δu(k-1), …, δu(k-L), ξ(k+1))``.
 
         With ``L`` input lags ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w`` with the decision
         ``v = δu(k)``; the inputs shift one lag per step. The horizon counts ``horizon`` steps
         after the longest lag, so the decision is weighed where it has acted. With integral
         action the model is augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C selects
-        the position rows). The model is written by :meth:`_write_plan`.
+        the position rows). The model is written by :meth:`_write_plan`; with a ``gain``
+        planned before (``defer_learning``) the command is that gain on this state.
         """
         config, n = self.config, self.n_joints
         p, s = 2 * n, (2 + config.input_lags) * n  # s: the state without the integral
-        x = (control := self._write_plan()).x
+        control = self._write_plan() if gain is None else self._receding
+        assert control is not None
+        x = control.x
         x[:p] = dx
         # After this sample's identification step the inputs hold δu(k-1), …, δu(k-1-L).
         x[p:s] = self._z_du[: s - p]
         if config.q_integral > 0.0:
             x[s:] = self._integrate(dx)
-        return control.solve()
+        return control.solve() if gain is None else control.input_for(gain)
 
     def _write_plan(self, weight: float | None = None) -> RecedingHorizonControl:
         """The receding-horizon controller with the identified model written into it

@@ -489,6 +489,11 @@ class RecedingHorizonControl:
             S += self.R
         return _solve_spd(S, PB.T @ self._A[:, columns])
 
+    def input_for(self, gain: np.ndarray) -> np.ndarray:
+        """``u(k) = -K (x, 1)`` (a fresh array) for a ``gain`` from :meth:`gain` (all columns)
+        and the state in the view :attr:`x`: a plan made before the state came."""
+        return np.negative(np.dot(gain, self._s))
+
     def _riccati(self) -> np.ndarray:
         """``P_1`` of the backward recursion over the horizon (a buffer of this object's)."""
         A, B, R, Qt = self._A, self._B, self.R, self._Qt

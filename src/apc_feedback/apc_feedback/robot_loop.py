@@ -140,6 +140,13 @@ class RobotLoop:
     stop_time : float
         A start after a fault or an abort brings the arm to rest from its measured state over
         this (s); 0 holds the measured position at once.
+    command_first : bool
+        An adaptive law sends each command from the gain it planned at the sample before and
+        identifies, moves its prior and plans after the command has left
+        (:meth:`command_published`; ``AdaptiveFeedback.defer_learning``): the path from state
+        to command loses the RLS step and the Riccati recursion. For short periods (T = 1 ms),
+        where they are a third of the period; at T = 10 ms it gains nothing and the older
+        model costs a start's transient a little (docs/robot.md, "Command first").
     """
 
     law: FeedbackLaw
@@ -153,6 +160,7 @@ class RobotLoop:
     supervisor: Supervisor | None = None
     fallback: FeedbackLaw | None = None
     stop_time: float = STOP_TIME_S
+    command_first: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stop_time < float("inf"):
@@ -160,6 +168,9 @@ class RobotLoop:
         if (self.supervisor is None) != (self.fallback is None):
             raise ValueError("a supervisor needs a fallback law and a fallback a supervisor")
         self._limit = self.command.to_model(self.command.limit)
+        if self.command_first and hasattr(self.law, "defer_learning"):
+            self.law.defer_learning = True
+        self._settle = getattr(self.law, "settle", None)
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
         self.active = False
@@ -269,10 +280,13 @@ class RobotLoop:
 
     def command_published(self, now_ns: int) -> None:
         """The node published the step's command at ``now``: the state-to-command time of the
-        newest law command (a gravity hold has no state)."""
+        newest law command (a gravity hold has no state); with ``command_first`` the law
+        learns from the sample now."""
         if self.command_state_ns is not None:
             self.timing.commanded(self.command_state_ns, now_ns)
             self.command_state_ns = None
+        if self._settle is not None:
+            self._settle()
 
     # -- the loop -------------------------------------------------------------------------------
     def _start(self, k: int, sample: JointSample) -> None:

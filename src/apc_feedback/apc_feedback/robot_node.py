@@ -178,6 +178,12 @@ PARAMS: tuple[Param, ...] = (
         0.0,
         10.0,
     ),
+    Param(
+        "command_first",
+        False,
+        "the adaptive law sends each command from the gain planned at the sample before, and "
+        "identifies and plans after it has left (for short periods: T = 1 ms)",
+    ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
 )
@@ -260,6 +266,7 @@ class RobotNode(LifecycleNode):
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=path_tolerance,
             stop_time=values["stop_time"],
+            command_first=values["command_first"],
             count=diag.count,
             log=level_logger(self),
             **supervision,

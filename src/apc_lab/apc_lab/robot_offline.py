@@ -174,6 +174,7 @@ def run_robot_loop(
     effort: bool = True,
     missed: float = 0.0,
     missed_seed: int = 0,
+    command_first: bool = False,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -228,6 +229,9 @@ def run_robot_loop(
         The share of the driver's cycles whose state is not published, drawn with the seed: a
         driver on a loaded machine misses cycles (``robot_sim``'s ``unpublished_cycles`` on wall
         time; the arm moves on, no state goes out).
+    command_first : bool
+        Robot mode's ``command_first``: the law's command from the gain planned at the sample
+        before (simulated time has no compute time, so only its cost shows here).
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -286,6 +290,7 @@ def run_robot_loop(
         plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,
+        command_first=command_first,
         count=lambda name: counts.update((name,)),
         log=lambda level, text: lines.append((level, text)),
         **supervision,
