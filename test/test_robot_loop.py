@@ -887,3 +887,30 @@ def test_command_first_learns_once_the_command_has_left():
     for i, event in enumerate(events):
         if event == "command, learning left":
             assert events[i + 1 : i + 3] == ["published", "learnt"]
+
+
+@pytest.mark.parametrize(
+    ("driver_ms", "period_ms", "advice"),
+    [
+        (8.0, 10.0, "0.008 s"),
+        (6.0, 10.0, "0.012 s"),
+        (20.0, 10.0, "0.02 s"),
+        (4.0, 10.0, None),
+        (2.0, 10.0, None),
+        (1.0, 1.0, None),
+        (8.0, 8.0, None),
+    ],
+)
+def test_a_driver_whose_period_does_not_divide_t_gets_the_period_that_would(
+    driver_ms, period_ms, advice
+):
+    """A driver period over half of T that does not divide it (125 Hz under T = 10 ms) is
+    warned about once, with the multiple of it nearest T; a faster driver (250 Hz), one that
+    divides T and one that is T are not."""
+    run = run_robot_loop(0.3, driver_ms=driver_ms, period_ms=period_ms, phase_ms=0.3)
+    warned = [text for level, text in run.lines if "does not divide" in text]
+    if advice is None:
+        assert not warned and "period_advice" not in run.counts
+    else:
+        assert run.counts["period_advice"] == 1 and len(warned) == 1
+        assert warned[0].endswith(f"({advice})")

@@ -171,6 +171,7 @@ class RobotLoop:
         if self.command_first and hasattr(self.law, "defer_learning"):
             self.law.defer_learning = True
         self._settle = getattr(self.law, "settle", None)
+        self._advised_driver_ns = 0  # the driver period _advise_period last judged
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
         self.active = False
@@ -305,6 +306,7 @@ class RobotLoop:
         difference; a measured velocity has none.
         """
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
+        self._advise_period(k)
         self._tell_law()
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
@@ -316,6 +318,33 @@ class RobotLoop:
                 self._stop(k, sample)
         self._restart = self._replan = False
         self.count("starts")
+
+    def _advise_period(self, k: int) -> None:
+        """Once per driver period seen: a driver whose period is over half of T and does not
+        divide it (125 Hz under T = 10 ms) puts its states 0-4 ms off the sample times and its
+        commands' delay changes from sample to sample over a cycle of samples; a warning says
+        which ``period`` is a multiple of the driver's. In simulated time such a driver lost the
+        Panda at T = 10 ms with 30 % of the commands a cycle late (the law alone 2 runs of 5;
+        supervised, with every physical effect, 2 of 5) and at 8 ms none (docs/robot.md, "When
+        the arm applies a command"). Faster drivers (250 Hz: T is 2.5 of their periods) track
+        at T = 10 ms better than at a multiple of their period."""
+        driver_ns = self.sampler.driver_period_ns
+        if driver_ns == self._advised_driver_ns:
+            return
+        self._advised_driver_ns = driver_ns
+        ratio = self.period_ns / driver_ns
+        if ratio >= 2.0 or abs(ratio - round(ratio)) < 0.02:
+            return
+        multiple = max(1, round(ratio)) * driver_ns * 1e-9
+        self.count("period_advice")
+        self.log(
+            "warn",
+            f"sample {k}: the driver's period {driver_ns * 1e-6:.3g} ms does not divide the "
+            f"sampling period {self.period_ns * 1e-6:.3g} ms: its states are carried to the "
+            "sample times and a command's delay changes from sample to sample, which the "
+            f"adaptive law does not model; set 'period' to a multiple of the driver's "
+            f"({multiple:.4g} s)",
+        )
 
     def _stop(self, k: int, sample: JointSample) -> None:
         """Bring the arm to rest from the ``sample``'s state, from sample ``k`` on."""
