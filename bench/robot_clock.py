@@ -52,6 +52,8 @@ on at 500 Hz, one run per law (~25 s).
     .venv/bin/python bench/robot_clock.py --quick --logs LOGDIR --json OUT.json --md OUT.md
     .venv/bin/python bench/robot_clock.py --arms panda --effects physical --rates 250 \
         --velocity-source exact --no-write      # a drive that measures the arm's velocity
+    .venv/bin/python bench/robot_clock.py --rates 100 --laws "adaptive recommended" \
+        --robot-node feedforward_ahead=true --no-write   # a robot_node parameter of every law
 """
 
 from __future__ import annotations
@@ -121,6 +123,7 @@ class RunSpec:
     index: int
     phase_s: float
     velocity_source: str = ""  # a physical arm's drive velocity, if not its preset's
+    node_settings: tuple[str, ...] = ()  # NAME=VALUE: robot_node parameters of every law
 
     @property
     def tag(self) -> str:
@@ -245,7 +248,10 @@ class WallRun:
 
         robot_file = benchlib.CONFIG / rc.ROBOT_FILES[s.arm]
         cmd = [str(BIN / "robot_node"), "--ros-args", "--params-file", str(robot_file)]
-        self._spawn("controllers", cmd + controller_arguments(s.arm, s.law, s.effects))
+        settings = [
+            a for nv in s.node_settings for a in ("-p", f"robot_node:{nv.replace('=', ':=', 1)}")
+        ]
+        self._spawn("controllers", cmd + controller_arguments(s.arm, s.law, s.effects) + settings)
 
     def log_tail(self) -> str:
         return benchlib.log_tail(self.workdir, self.spec.tag)
@@ -400,9 +406,11 @@ def run(
     seed: int = 0,
     logs: Path | None = None,
     velocity_source: str = "",
+    node_settings: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Every cell (``quick``: :data:`QUICK`'s), ``runs`` runs each; {"robot_clock": result}.
-    ``velocity_source``: the physical arms' drive velocity instead of their preset's.
+    ``velocity_source``: the physical arms' drive velocity instead of their preset's;
+    ``node_settings``: ``NAME=VALUE`` robot_node parameters given to every law's node.
     Node logs and parameter files go to ``logs`` (kept) or a temporary directory."""
     benchlib.isolate_dds()
     base: dict[str, Any] = QUICK if quick else {
@@ -431,6 +439,7 @@ def run(
             f"-p robot_node:path_tolerance:={PATH_TOLERANCE} (adaptive: the file's adaptive.* "
             "overrides put back to the preset's values)",
             "physical arms' velocity": velocity_source or "the preset's",
+            "robot_node settings": list(node_settings),
             "run": f"configure, activate at a random phase of the driver's cycle, hold "
             f"{HOLD_BEFORE_S:g} s, case (c) goal, hold {HOLD_AFTER_S:g} s",
         },
@@ -443,7 +452,7 @@ def run(
             cell_runs = []
             for i in range(runs):
                 phase = rng.uniform(0.0, 1.0 / rate)
-                spec = RunSpec(arm, eff, rate, law, i, phase, velocity_source)
+                spec = RunSpec(arm, eff, rate, law, i, phase, velocity_source, tuple(node_settings))
                 r = run_one(workdir, spec)
                 benchlib.progress(_progress_line(spec, runs, r))
                 cell_runs.append(r)
@@ -484,6 +493,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="the physical arms' drive velocity (robot_sim's velocity_source) instead of the "
         "preset's difference: exact for a drive that measures the arm's",
     )
+    parser.add_argument(
+        "--robot-node",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a robot_node parameter for every law (repeatable), e.g. feedforward_ahead=true",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
     out = run(
@@ -496,6 +512,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         seed=args.seed,
         logs=args.logs,
         velocity_source=args.velocity_source,
+        node_settings=args.robot_node,
     )["robot_clock"]
     text = markdown(out)
     print(text)

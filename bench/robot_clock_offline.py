@@ -22,8 +22,8 @@ far the command moves from one sample to the next in the hold after the move, th
 worst joint's mean |u(k) - u(k-1)| (N m). About three minutes on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--no-armature] [--alpha-model A] [--set NAME=VALUE ...]
-        [--json FILE]
+        [--ideal-velocity] [--no-armature] [--feedforward-ahead] [--alpha-model A]
+        [--set NAME=VALUE ...] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
@@ -82,6 +82,7 @@ def one_run(
     ideal_velocity: bool = False,
     setup: Callable[[RobotLoop], object] | None = None,
     armature: bool = True,
+    feedforward_ahead: bool = False,
 ) -> dict:
     """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
     joint (deg), hand-overs, the commands' chatter in the hold (N m).
@@ -112,6 +113,7 @@ def one_run(
         settings=settings,
         velocity=True if ideal_velocity else None,
         setup=setup,
+        feedforward_ahead=feedforward_ahead,
         armature=controller_armature(arm, effects)
         if armature and isinstance(effects, str)
         else None,
@@ -160,10 +162,12 @@ def measure(
     settings: dict | None = None,
     ideal_velocity: bool = False,
     armature: bool = True,
+    feedforward_ahead: bool = False,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
     preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
-    ``armature``: the controllers know a physical arm's rotor inertia."""
+    ``armature``: the controllers know a physical arm's rotor inertia; ``feedforward_ahead``:
+    robot mode's."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -181,6 +185,7 @@ def measure(
                                 settings,
                                 ideal_velocity,
                                 armature=armature,
+                                feedforward_ahead=feedforward_ahead,
                             )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
@@ -300,6 +305,11 @@ def parser() -> argparse.ArgumentParser:
         help="the controllers' model of a physical arm lacks its rotor inertia",
     )
     cli.add_argument(
+        "--feedforward-ahead",
+        action="store_true",
+        help="robot mode's feedforward_ahead: the nominal torque of when a command acts",
+    )
+    cli.add_argument(
         "--alpha-model",
         dest="set",
         action="append",
@@ -327,7 +337,13 @@ def main() -> None:
     args = parser().parse_args()
     changed = overrides(args)
     settings = {**recommended_settings(), **changed} if changed else None
-    cells = measure(tuple(args.arms), settings, args.ideal_velocity, not args.no_armature)
+    cells = measure(
+        tuple(args.arms),
+        settings,
+        args.ideal_velocity,
+        not args.no_armature,
+        args.feedforward_ahead,
+    )
     print()
     print(markdown(cells), end="")
     if args.json:
@@ -336,6 +352,7 @@ def main() -> None:
             "relinearize": (settings or recommended_settings())["relinearize"],
             "ideal_velocity": args.ideal_velocity,
             "armature": not args.no_armature,
+            "feedforward_ahead": args.feedforward_ahead,
             "alpha_model": changed.get("alpha_model"),
             "settings_overrides": changed,
             "cells": cells,

@@ -74,7 +74,7 @@ from apc_feedback.command_map import CommandMap
 from apc_feedback.delay_telling import DelayTelling
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
-from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig
+from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, period_advice
 from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
@@ -146,7 +146,11 @@ class RobotLoop:
         (:meth:`command_published`; ``AdaptiveFeedback.defer_learning``): the path from state
         to command loses the RLS step and the Riccati recursion. For short periods (T = 1 ms),
         where they are a third of the period; at T = 10 ms it gains nothing and the older
-        model costs a start's transient a little (docs/robot.md, "Command first").
+        model costs a start's transient a little (docs/robot.md, "A robot's clock").
+    feedforward_ahead : bool
+        The nominal torque sent with sample k is the plan's at the time the adaptive law models
+        the command acting (its input delay after the sample), not at the sample's time
+        (docs/robot.md, "The nominal torque of when a command acts").
     """
 
     law: FeedbackLaw
@@ -161,6 +165,7 @@ class RobotLoop:
     fallback: FeedbackLaw | None = None
     stop_time: float = STOP_TIME_S
     command_first: bool = False
+    feedforward_ahead: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stop_time < float("inf"):
@@ -172,6 +177,8 @@ class RobotLoop:
             self.law.defer_learning = True
         self._settle = getattr(self.law, "settle", None)
         self._advised_driver_ns = 0  # the driver period _advise_period last judged
+        settings = getattr(self.law, "settings", None)
+        self.law_lags = bool(getattr(settings, "input_lags", 0))  # the law models a delay
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
         self.active = False
@@ -320,22 +327,14 @@ class RobotLoop:
         self.count("starts")
 
     def _advise_period(self, k: int) -> None:
-        """Once per driver period seen: a driver whose period is over half of T and does not
-        divide it (125 Hz under T = 10 ms) puts its states 0-4 ms off the sample times and its
-        commands' delay changes from sample to sample over a cycle of samples; a warning says
-        which ``period`` is a multiple of the driver's. In simulated time such a driver lost the
-        Panda at T = 10 ms with 30 % of the commands a cycle late (the law alone 2 runs of 5;
-        supervised, with every physical effect, 2 of 5) and at 8 ms none (docs/robot.md, "When
-        the arm applies a command"). Faster drivers (250 Hz: T is 2.5 of their periods) track
-        at T = 10 ms better than at a multiple of their period."""
+        """Once per driver period seen: warn of one that ``T`` should be a multiple of
+        (:func:`~apc_feedback.robot_sampling.period_advice`), naming that period."""
         driver_ns = self.sampler.driver_period_ns
         if driver_ns == self._advised_driver_ns:
             return
         self._advised_driver_ns = driver_ns
-        ratio = self.period_ns / driver_ns
-        if ratio >= 2.0 or abs(ratio - round(ratio)) < 0.02:
+        if (multiple := period_advice(self.period_ns, driver_ns)) is None:
             return
-        multiple = max(1, round(ratio)) * driver_ns * 1e-9
         self.count("period_advice")
         self.log(
             "warn",
@@ -417,7 +416,10 @@ class RobotLoop:
         be computed (counted: ``feedforward_errors``)."""
         out = self.plan.sample(k, position, lambda sp: sp)
         report_sampled(k, out, self.count, self.log)
-        return out.setpoint
+        timing = self._input_timing
+        if out.setpoint is None or not (self.feedforward_ahead and self.law_lags and timing):
+            return out.setpoint
+        return self.plan.feedforward.acting_later(out.setpoint, timing.delay)
 
     def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:
         """The law on ``sample`` and its set point: the command; none when the path tolerance

@@ -184,6 +184,12 @@ PARAMS: tuple[Param, ...] = (
         "the adaptive law sends each command from the gain planned at the sample before, and "
         "identifies and plans after it has left (for short periods: T = 1 ms)",
     ),
+    Param(
+        "feedforward_ahead",
+        False,
+        "the nominal torque sent with a sample is the plan's at the time the adaptive law "
+        "models its command acting (its input delay later), not at the sample's",
+    ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
 )
@@ -267,6 +273,7 @@ class RobotNode(LifecycleNode):
             path_tolerance=path_tolerance,
             stop_time=values["stop_time"],
             command_first=values["command_first"],
+            feedforward_ahead=values["feedforward_ahead"],
             count=diag.count,
             log=level_logger(self),
             **supervision,

@@ -531,3 +531,21 @@ class RobotSampler:
         sample = JointSample(k * period, position, velocity, newest.effort)
         self.last = Take(k, sample, stamp, now_ns - stamp, offset, missed)
         return sample
+
+
+def period_advice(period_ns: int, driver_ns: int) -> float | None:
+    """The sampling period (s) to advise for a driver whose period ``driver_ns`` is over half
+    of ``T = period_ns`` and does not divide it (125 Hz under T = 10 ms): the multiple of the
+    driver's period nearest ``T``; None for any other driver.
+
+    Such a driver's states fall up to half its period off the sample times and its commands'
+    delay changes from sample to sample over a cycle of samples. In simulated time it lost the
+    Panda at T = 10 ms with 30 % of the commands a cycle late (the law alone 2 runs of 5;
+    supervised, with every physical effect, 2 of 5) and at 8 ms none (docs/robot.md, "When the
+    arm applies a command"). Faster drivers (250 Hz: T is 2.5 of their periods) track better
+    at T = 10 ms than at a multiple of their period.
+    """
+    ratio = period_ns / driver_ns
+    if ratio >= 2.0 or abs(ratio - round(ratio)) < 0.02:
+        return None
+    return max(1, round(ratio)) * driver_ns * 1e-9

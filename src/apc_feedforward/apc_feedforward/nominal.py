@@ -9,7 +9,7 @@ Eqs. 2-8 in spatial-algebra form: a forward pass for link velocities and acceler
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -128,3 +128,19 @@ class Feedforward:
         q, qd, qdd = block[1][i], block[2][i], block[3][i]
         u_n = nominal_torque(self.model, self._data, q, qd, qdd)
         return Setpoint(k=k, t=t, q=q, qd=qd, qdd=qdd, u_n=u_n)
+
+    def acting_later(self, setpoint: Setpoint, delay: float) -> Setpoint:
+        """``setpoint`` (this plan's, sample ``k``) with the nominal torque of the plan
+        ``delay`` s later, linear between its samples: what the arm should get from a command
+        that acts ``delay`` after its sample. Position, velocity and acceleration stay sample
+        ``k``'s (the error is measured there)."""
+        if not delay > 0.0:
+            return setpoint
+        ahead = delay / self.period
+        i = int(np.floor(ahead))
+        f = ahead - i
+        first = setpoint.u_n if i == 0 else self.sample(setpoint.k + i).u_n
+        if f == 0.0:
+            return replace(setpoint, u_n=first)
+        second = self.sample(setpoint.k + i + 1).u_n
+        return replace(setpoint, u_n=(1.0 - f) * first + f * second)

@@ -175,6 +175,7 @@ def run_robot_loop(
     missed: float = 0.0,
     missed_seed: int = 0,
     command_first: bool = False,
+    feedforward_ahead: bool = False,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -232,6 +233,9 @@ def run_robot_loop(
     command_first : bool
         Robot mode's ``command_first``: the law's command from the gain planned at the sample
         before (simulated time has no compute time, so only its cost shows here).
+    feedforward_ahead : bool
+        Robot mode's ``feedforward_ahead``: the nominal torque of when the law models the
+        command acting.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -291,6 +295,7 @@ def run_robot_loop(
         gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
         path_tolerance=tolerance,
         command_first=command_first,
+        feedforward_ahead=feedforward_ahead,
         count=lambda name: counts.update((name,)),
         log=lambda level, text: lines.append((level, text)),
         **supervision,
