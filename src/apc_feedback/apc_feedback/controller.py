@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from collections import deque
@@ -57,8 +58,7 @@ RELINEARIZE_PERIOD_S = 0.01
 
 
 class _Pending(NamedTuple):
-    """What an update with ``defer_learning`` leaves for :meth:`AdaptiveFeedback.settle`
-    (``dx`` None: the update identified itself, only the gain is planned)."""
+    """An update's work left for :meth:`AdaptiveFeedback.settle` (``dx`` None: the gain only)."""
 
     k: int
     dx: np.ndarray | None
@@ -90,11 +90,9 @@ class AdaptiveFeedback(FeedbackLaw):
 
     ``defer_learning`` (robot mode's ``command_first``; off: the paper's order): with a receding
     plan ``du(k)`` is the gain planned after sample ``k-1`` on the state at ``k``; the step to
-    ``k``, the prior's move and the next plan wait for :meth:`settle` (the caller's, once the
-    command has left; else the next update's). Åström and Wittenmark's order
-    (*Computer-Controlled Systems*, on implementation: the output right after the input, what
-    the next sample needs after it), for a model one sample older. A (re)start or new weights
-    plan first; the output reports the step taken after the last command.
+    ``k``, the prior's move and the next plan wait for :meth:`settle`. Åström and Wittenmark's
+    order (*Computer-Controlled Systems*, on implementation: the output right after the input),
+    for a model a sample older; the output reports the step taken after the last command.
 
     Parameters
     ----------
@@ -121,8 +119,7 @@ class AdaptiveFeedback(FeedbackLaw):
         self.input_timing = InputTiming(config.input_delay)
         # (k, δu) another law sent while this one was idle: on their way at its next start.
         self._observed: deque[tuple[int, np.ndarray]] = deque(maxlen=MAX_INPUT_LAGS + 1)
-        #: Send each command first, learn after it (:meth:`settle`); see the class docstring.
-        self.defer_learning = False
+        self.defer_learning = False  # the class docstring
         self._set_weights(config)
         self.reset()
 
@@ -202,8 +199,8 @@ class AdaptiveFeedback(FeedbackLaw):
         self._u_n_prev = np.zeros(n)
         self.integral = np.zeros(n)
         self.input_change_weight, self._next_ring_check = self.config.q_input_change, None
-        self._gain, self._pending = None, None
-        self._settled: tuple[np.ndarray | None, float, bool] | None = None
+        # defer_learning: the next gain, the work left after a command, that step's report.
+        self._gain = self._pending = self._settled = None
 
     def update(
         self,
@@ -279,11 +276,13 @@ class AdaptiveFeedback(FeedbackLaw):
         gain = self._gain
         if gain is not None and not starting:  # defer_learning: the plan of the sample before
             du = self._receding_control(dx, gain)
-            self._pending = _Pending(k, dx.copy(), identify, follow, q_d, qd_d, u_n)
-            if self._settled is not None:  # what the step after the last command gave
-                residual, trace_p, rejected = self._settled
-                self._settled = None
+            self._pending = _Pending(
+                k, dx.copy(), identify, follow, q_d.copy(), qd_d.copy(), u_n.copy()
+            )
+            residual, trace_p, rejected = self._settled or (residual, trace_p, rejected)
+            self._settled = None
         else:
+            self._settled = None  # this step reports itself
             if identify:
                 residual, trace_p, rejected = self._identify(dx)
             if follow:
@@ -305,23 +304,27 @@ class AdaptiveFeedback(FeedbackLaw):
         return FeedbackOutput(du, residual, trace_p, rejected, skipped)
 
     def settle(self) -> None:
-        """With ``defer_learning``, once the last update's command has left: its identification
-        step, the prior's move and the plan of the next command's gain (none if it cannot be
-        solved: the next sample plans first and fails there, counted). Else nothing."""
+        """``defer_learning``, after a command (else the next update): the step, the prior's move,
+        the next gain. A failing step raises and makes the next sample a gap; without a plan
+        (new weights since, one that cannot be solved) the next sample plans first."""
         pending, self._pending = self._pending, None
         if pending is None:
             return
+        self._gain = None
         if pending.dx is not None:
-            if pending.identify:
-                residual, trace_p, rejected = self._identify(pending.dx)
-                self._settled = residual, trace_p, rejected
-            if pending.follow:
-                self._follow_setpoint(pending.q_d, pending.qd_d, pending.u_n)
+            try:
+                if pending.identify:
+                    self._settled = self._identify(pending.dx)
+                if pending.follow:
+                    self._follow_setpoint(pending.q_d, pending.qd_d, pending.u_n)
+            except ValueError:  # as an update that fails: the next sample is a gap
+                self._k_prev = pending.k - 1
+                raise
             self._z_dx[:] = pending.dx
-        try:
-            self._gain = self._plan_gain(pending.k)
-        except ValueError:  # ControlError: R + BᵀPB not positive definite, a gain not finite
-            self._gain = None
+        # ControlError (R + BᵀPB not positive definite) or new weights since: no gain.
+        with contextlib.suppress(ValueError):
+            if self._next_ring_check is not None:
+                self._gain = self._plan_gain(pending.k)
 
     def _identify(self, dx: np.ndarray) -> tuple[np.ndarray | None, float, bool]:
         """One RLS step to ``dx`` from ``z``: residual, ``trace(P)`` (NaN: none), refused."""
@@ -341,8 +344,7 @@ class AdaptiveFeedback(FeedbackLaw):
                 self.rls.undo()
                 self.projected_updates += 1
                 trace_p = self.rls.trace_p
-        except RlsError:
-            # Keep controlling with the last good estimate; the node counts and reports it.
+        except RlsError:  # keep controlling with the last good estimate; the node counts it
             self.rejected_updates += 1
             return residual, trace_p, True
         return residual, trace_p, False
@@ -351,8 +353,7 @@ class AdaptiveFeedback(FeedbackLaw):
         """The plan's gain over ``(δx, δu on their way, ξ, 1)`` after sample ``k``, its input
         ringing judged when due (a raised weight planned again)."""
         gain = self._write_plan().gain()
-        check = self._next_ring_check
-        if check is not None and k >= check:
+        if self._next_ring_check is not None and k >= self._next_ring_check:
             weight = self.input_change_weight
             self._damp_input_ringing(k, solved=True)  # reuses the recursion gain() ran
             if self.input_change_weight != weight:
@@ -506,12 +507,11 @@ class AdaptiveFeedback(FeedbackLaw):
     def _receding_control(self, dx: np.ndarray, gain: np.ndarray | None = None) -> np.ndarray:
         """The receding-horizon control over ``(δx(k), δu(k-1), …, δu(k-L), ξ(k+1))``.
 
-        With ``L`` input lags ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w`` with the decision
-        ``v = δu(k)``; the inputs shift one lag per step. The horizon counts ``horizon`` steps
-        after the longest lag, so the decision is weighed where it has acted. With integral
-        action the model is augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C selects
-        the position rows). The model is written by :meth:`_write_plan`; with a ``gain``
-        planned before (``defer_learning``) the command is that gain on this state.
+        With ``L`` input lags ``δx(k+1) = F δx + G₀ v + Σ_j G_j δu(k-j) + w``, ``v = δu(k)``;
+        the inputs shift one lag per step. The horizon counts ``horizon`` steps after the longest
+        lag, so the decision is weighed where it has acted. With integral action the model is
+        augmented with ``ξ(k+1) = ξ(k) + T C (F̂ δx + Ĝ δu + ŵ)`` (C: the position rows).
+        :meth:`_write_plan` writes the model; a ``gain`` planned before is applied instead.
         """
         config, n = self.config, self.n_joints
         p, s = 2 * n, (2 + config.input_lags) * n  # s: the state without the integral

@@ -141,16 +141,12 @@ class RobotLoop:
         A start after a fault or an abort brings the arm to rest from its measured state over
         this (s); 0 holds the measured position at once.
     command_first : bool
-        An adaptive law sends each command from the gain it planned at the sample before and
-        identifies, moves its prior and plans after the command has left
-        (:meth:`command_published`; ``AdaptiveFeedback.defer_learning``): the path from state
-        to command loses the RLS step and the Riccati recursion. For short periods (T = 1 ms),
-        where they are a third of the period; at T = 10 ms it gains nothing and the older
-        model costs a start's transient a little (docs/robot.md, "A robot's clock").
+        An adaptive law with a receding plan commands from the gain it planned a sample before
+        and learns after the publish (:meth:`command_published`; ``defer_learning``): for
+        T = 1 ms (docs/robot.md, "A robot's clock").
     feedforward_ahead : bool
-        The nominal torque sent with sample k is the plan's at the time the adaptive law models
-        the command acting (its input delay after the sample), not at the sample's time
-        (docs/robot.md, "The nominal torque of when a command acts").
+        Send the plan's nominal torque of when the law models the command acting, its input
+        delay after the sample (docs/robot.md, "The nominal torque of when a command acts").
     """
 
     law: FeedbackLaw
@@ -178,7 +174,7 @@ class RobotLoop:
         self._settle = getattr(self.law, "settle", None)
         self._advised_driver_ns = 0  # the driver period _advise_period last judged
         settings = getattr(self.law, "settings", None)
-        self.law_lags = bool(getattr(settings, "input_lags", 0))  # the law models a delay
+        self._law_lags = bool(getattr(settings, "input_lags", 0))  # the law models a delay
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
         self.active = False
@@ -294,7 +290,11 @@ class RobotLoop:
             self.timing.commanded(self.command_state_ns, now_ns)
             self.command_state_ns = None
         if self._settle is not None:
-            self._settle()
+            try:
+                self._settle()
+            except ValueError as exc:  # FeedbackError is one
+                self.count("feedback_law_errors")
+                self.log("error", f"after a command: {exc}; the next sample is a gap")
 
     # -- the loop -------------------------------------------------------------------------------
     def _start(self, k: int, sample: JointSample) -> None:
@@ -417,7 +417,7 @@ class RobotLoop:
         out = self.plan.sample(k, position, lambda sp: sp)
         report_sampled(k, out, self.count, self.log)
         timing = self._input_timing
-        if out.setpoint is None or not (self.feedforward_ahead and self.law_lags and timing):
+        if out.setpoint is None or not (self.feedforward_ahead and self._law_lags and timing):
             return out.setpoint
         return self.plan.feedforward.acting_later(out.setpoint, timing.delay)
 

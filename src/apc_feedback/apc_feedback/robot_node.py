@@ -182,7 +182,8 @@ PARAMS: tuple[Param, ...] = (
         "command_first",
         False,
         "the adaptive law sends each command from the gain planned at the sample before, and "
-        "identifies and plans after it has left (for short periods: T = 1 ms)",
+        "identifies and plans after it has left (for short periods: T = 1 ms; a law with a "
+        "receding plan, every preset but paper)",
     ),
     Param(
         "feedforward_ahead",
@@ -436,7 +437,10 @@ class RobotNode(LifecycleNode):
             self._command_msg.data = step.command.tolist()
             self.command_pub.publish(self._command_msg)
             assert self.loop is not None
+            started = time.perf_counter()
             self.loop.command_published(self._now())
+            if self.loop.command_first:  # the law's learning, after the command
+                self.diagnostics.time("learn", time.perf_counter() - started)
         sample, setpoint = step.sample, step.setpoint
         if sample is not None and self.sample_pub.get_subscription_count():
             self.sample_pub.publish(

@@ -141,3 +141,64 @@ def test_only_a_receding_plan_defers(controller_robot, weights):
     law = _deferred(model, _config(**weights))
     _run(law, _samples(model, 3), settle=False)
     assert (law._pending is not None) == (not weights)
+
+
+def test_the_identification_after_the_command_is_the_one_before_it(controller_robot):
+    """Without lags the regressor's input is the torque the arm applied (given here, the same
+    for both laws), so the model a deferred law holds after ``settle`` is, step for step, the
+    one the paper's order holds after its update: the same step to the same ``dx`` from the
+    same ``z``, and the prior moved to the same set points."""
+    model = controller_robot.model
+    config = _config(input_lags=0)
+    samples = _samples(model)
+    first, plain = _deferred(model, config), AdaptiveFeedback(model, config)
+    start = None
+    for k, q, qd, q_d, qd_d, qdd_d, u_n in samples:
+        applied = u_n + 0.5 * np.sin(k + np.arange(3))
+        first.update(k, q, qd, q_d, qd_d, qdd_d, u_n, applied)
+        first.settle()
+        plain.update(k, q, qd, q_d, qd_d, qdd_d, u_n, applied)
+        np.testing.assert_array_equal(first.rls.model_view(), plain.rls.model_view())
+        np.testing.assert_array_equal(first._z_dx, plain._z_dx)
+        start = plain.rls.model_view().copy() if start is None else start
+    assert not np.array_equal(plain.rls.model_view(), start)  # it identified
+
+
+def test_the_input_ringing_is_judged_after_the_commands_too(controller_robot):
+    """The plan's ringing check comes due every ``RING_CHECK_PERIOD_S`` in the deferred path as
+    in the paper's order, and new weights given with work left are judged before the next
+    command, whoever settles."""
+    model = controller_robot.model
+    samples = _samples(model, count=260)
+    law = _deferred(model, _config())
+    _run(law, samples[:5])
+    first_check = law._next_ring_check
+    _run(law, samples[5:250])
+    assert first_check is not None and law._next_ring_check > first_check + 100
+    law.update(*samples[250][:7], None)  # work left
+    law.reconfigure(dataclasses.replace(law.config, q_input_change=0.01))
+    assert law._next_ring_check is None
+    _run(law, samples[251:253], settle=False)  # the next update settles, then plans first
+    assert law._next_ring_check is not None and law.input_change_weight >= 0.01
+
+
+def test_a_step_that_fails_after_the_command_makes_the_next_sample_a_gap(
+    controller_robot, monkeypatch
+):
+    """An identification step that raises in ``settle`` reaches its caller (robot mode counts
+    it) and the next sample is a gap, as after an update that failed: no step across it."""
+    model = controller_robot.model
+    samples = _samples(model)
+    law = _deferred(model, _config())
+    _run(law, samples[:10])
+    law.update(*samples[10][:7], None)
+
+    def fail(dx):
+        raise ValueError("a step that cannot be taken")
+
+    monkeypatch.setattr(law, "_identify", fail)
+    with pytest.raises(ValueError, match="cannot be taken"):
+        law.settle()
+    monkeypatch.undo()
+    out = law.update(*samples[11][:7], None)
+    assert out.skipped
