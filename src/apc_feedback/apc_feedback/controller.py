@@ -237,7 +237,7 @@ class AdaptiveFeedback(FeedbackLaw):
             self._prior_model = None
             if self._setpoint_model is not None:  # relinearize: the same series every sample
                 prior = self._setpoint_model(
-                    q_d, qd_d, u_n, self._delay(), self.input_timing.stencil
+                    q_d, qd_d, u_n, self.split_delay(), self.input_timing.stencil
                 )
                 F0, G0 = prior[:, : 2 * self.n_joints], prior[:, 2 * self.n_joints :]
                 self._prior_model = prior
@@ -360,8 +360,8 @@ class AdaptiveFeedback(FeedbackLaw):
                 gain = self._write_plan().gain()
         return gain
 
-    def _delay(self) -> float:
-        """The delay ``Ĝ(0)`` is split by (none without lags)."""
+    def split_delay(self) -> float:
+        """The modelled delay (s) from a sample to its command acting (0 without lags)."""
         return self.input_timing.delay if self.config.input_lags else 0.0
 
     def _linearize(
@@ -375,7 +375,7 @@ class AdaptiveFeedback(FeedbackLaw):
             u_n,
             self.config.period,
             self.config.initial_model,
-            delay=self._delay(),
+            delay=self.split_delay(),
             input_lags=self.config.input_lags,
             stencil=self.input_timing.stencil,
             data=self._data,
@@ -386,7 +386,7 @@ class AdaptiveFeedback(FeedbackLaw):
         identification step just taken was about the previous sample's prior."""
         assert self._setpoint_model is not None and self._prior_model is not None
         assert self._prior_input_gain is not None
-        prior = self._setpoint_model(q_d, qd_d, u_n, self._delay(), self.input_timing.stencil)
+        prior = self._setpoint_model(q_d, qd_d, u_n, self.split_delay(), self.input_timing.stencil)
         self.input_timing.choice.moved(
             self.input_timing.candidates(prior, self._setpoint_model.with_delay)
         )

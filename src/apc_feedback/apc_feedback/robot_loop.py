@@ -169,12 +169,13 @@ class RobotLoop:
         if (self.supervisor is None) != (self.fallback is None):
             raise ValueError("a supervisor needs a fallback law and a fallback a supervisor")
         self._limit = self.command.to_model(self.command.limit)
-        if self.command_first and hasattr(self.law, "defer_learning"):
+        # A law that can learn after its command (AdaptiveFeedback) and one that models when a
+        # command acts; None for others.
+        self._settle = getattr(self.law, "settle", None) if self.command_first else None
+        if self._settle is not None:
             self.law.defer_learning = True
-        self._settle = getattr(self.law, "settle", None)
+        self._split_delay = getattr(self.law, "split_delay", None)
         self._advised_driver_ns = 0  # the driver period _advise_period last judged
-        settings = getattr(self.law, "settings", None)
-        self._law_lags = bool(getattr(settings, "input_lags", 0))  # the law models a delay
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
         self.active = False
@@ -416,10 +417,9 @@ class RobotLoop:
         be computed (counted: ``feedforward_errors``)."""
         out = self.plan.sample(k, position, lambda sp: sp)
         report_sampled(k, out, self.count, self.log)
-        timing = self._input_timing
-        if out.setpoint is None or not (self.feedforward_ahead and self._law_lags and timing):
+        if out.setpoint is None or not self.feedforward_ahead or self._split_delay is None:
             return out.setpoint
-        return self.plan.feedforward.acting_later(out.setpoint, timing.delay)
+        return self.plan.feedforward.acting_later(out.setpoint, self._split_delay())
 
     def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:
         """The law on ``sample`` and its set point: the command; none when the path tolerance
