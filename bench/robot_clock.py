@@ -53,7 +53,7 @@ on at 500 Hz, one run per law (~25 s).
     .venv/bin/python bench/robot_clock.py --arms panda --effects physical --rates 250 \
         --velocity-source exact --no-write      # a drive that measures the arm's velocity
     .venv/bin/python bench/robot_clock.py --rates 100 --laws "adaptive recommended" \
-        --robot-node feedforward_ahead=true --no-write   # a robot_node parameter of every law
+        --robot-node feedforward_ahead=false --no-write  # a robot_node parameter of every law
 """
 
 from __future__ import annotations
@@ -498,7 +498,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="a robot_node parameter for every law (repeatable), e.g. feedforward_ahead=true",
+        help="a robot_node parameter for every law (repeatable), e.g. feedforward_ahead=false",
     )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)

@@ -22,7 +22,7 @@ far the command moves from one sample to the next in the hold after the move, th
 worst joint's mean |u(k) - u(k-1)| (N m). About three minutes on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--no-armature] [--feedforward-ahead] [--alpha-model A]
+        [--ideal-velocity] [--no-armature] [--no-feedforward-ahead] [--alpha-model A]
         [--set NAME=VALUE ...] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
@@ -82,7 +82,7 @@ def one_run(
     ideal_velocity: bool = False,
     setup: Callable[[RobotLoop], object] | None = None,
     armature: bool = True,
-    feedforward_ahead: bool = False,
+    feedforward_ahead: bool = True,
 ) -> dict:
     """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
     joint (deg), hand-overs, the commands' chatter in the hold (N m).
@@ -162,7 +162,7 @@ def measure(
     settings: dict | None = None,
     ideal_velocity: bool = False,
     armature: bool = True,
-    feedforward_ahead: bool = False,
+    feedforward_ahead: bool = True,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
     preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
@@ -305,9 +305,9 @@ def parser() -> argparse.ArgumentParser:
         help="the controllers' model of a physical arm lacks its rotor inertia",
     )
     cli.add_argument(
-        "--feedforward-ahead",
+        "--no-feedforward-ahead",
         action="store_true",
-        help="robot mode's feedforward_ahead: the nominal torque of when a command acts",
+        help="robot mode's feedforward_ahead off: the nominal torque of the sample's own time",
     )
     cli.add_argument(
         "--alpha-model",
@@ -342,7 +342,7 @@ def main() -> None:
         settings,
         args.ideal_velocity,
         not args.no_armature,
-        args.feedforward_ahead,
+        not args.no_feedforward_ahead,
     )
     print()
     print(markdown(cells), end="")
@@ -352,7 +352,7 @@ def main() -> None:
             "relinearize": (settings or recommended_settings())["relinearize"],
             "ideal_velocity": args.ideal_velocity,
             "armature": not args.no_armature,
-            "feedforward_ahead": args.feedforward_ahead,
+            "feedforward_ahead": not args.no_feedforward_ahead,
             "alpha_model": changed.get("alpha_model"),
             "settings_overrides": changed,
             "cells": cells,

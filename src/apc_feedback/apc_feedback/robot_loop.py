@@ -52,12 +52,11 @@ Faults.
 Deactivation sends the model's gravity hold once and stops commanding (an inactive
 controller commands nothing: another one may take the joints over).
 
-The driver's rate. The command leaves in its state's callback and the driver applies it at its
-next write, one driver period (plus the trip) after the state, which Eq. 16 does not model; a
-law that does (``AdaptiveFeedback`` with ``input_lags``) is told the driver period at a start,
-or the delay the driver's effort shows (:class:`~apc_feedback.command_echo.CommandEcho`; which
-one, and when another is told, :class:`~apc_feedback.delay_telling.DelayTelling`), and the
-samples' velocity as the states show it (docs/robot.md, "A robot's clock").
+The driver's rate. The driver applies a command at its next write, a driver period (plus the
+trip) after the state, which Eq. 16 does not model; a law that does (``AdaptiveFeedback`` with
+``input_lags``) is told the driver period at a start, or the delay the driver's effort shows
+(:class:`~apc_feedback.command_echo.CommandEcho`, :class:`~apc_feedback.delay_telling.
+DelayTelling`), and the samples' velocity as the states show it (docs/robot.md).
 """
 
 from __future__ import annotations
@@ -122,8 +121,7 @@ class RobotLoop:
     sampling : RobotSamplingConfig
     command : CommandMap
     plan : GoalQueue
-        The feedforward's plan on the controller's model: set point and nominal torque of
-        every sample, the goals.
+        The feedforward's plan on the model: every sample's set point and torque, the goals.
     gravity : callable
         ``g(q)`` of the controller's model (model order): the hold without feedback.
     path_tolerance : (n,) ndarray
@@ -145,8 +143,8 @@ class RobotLoop:
         and learns after the publish (:meth:`command_published`; ``defer_learning``): for
         T = 1 ms (docs/robot.md, "A robot's clock").
     feedforward_ahead : bool
-        Send the plan's nominal torque of when the law models the command acting, its input
-        delay after the sample (docs/robot.md, "The nominal torque of when a command acts").
+        Send the nominal torque of the sample the law models the command acting over, whole
+        samples after its own (:meth:`RobotSampler.samples_late`; docs/robot.md).
     """
 
     law: FeedbackLaw
@@ -161,7 +159,7 @@ class RobotLoop:
     fallback: FeedbackLaw | None = None
     stop_time: float = STOP_TIME_S
     command_first: bool = False
-    feedforward_ahead: bool = False
+    feedforward_ahead: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stop_time < float("inf"):
@@ -413,13 +411,15 @@ class RobotLoop:
 
     def _setpoint(self, k: int, position: np.ndarray) -> Setpoint | None:
         """The plan's set point of sample ``k`` (``position``: the measured one, where a start
-        holds); what the plan did on the way counted and logged. None if not even a hold could
-        be computed (counted: ``feedforward_errors``)."""
+        holds), with ``feedforward_ahead`` the nominal torque of when its command acts; what
+        the plan did on the way counted and logged. None if not even a hold could be computed
+        (counted: ``feedforward_errors``)."""
         out = self.plan.sample(k, position, lambda sp: sp)
         report_sampled(k, out, self.count, self.log)
         if out.setpoint is None or not self.feedforward_ahead or self._split_delay is None:
             return out.setpoint
-        return self.plan.feedforward.acting_later(out.setpoint, self._split_delay())
+        late = self.sampler.samples_late(self._split_delay())
+        return self.plan.feedforward.acting_later(out.setpoint, late)
 
     def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:
         """The law on ``sample`` and its set point: the command; none when the path tolerance

@@ -187,9 +187,10 @@ PARAMS: tuple[Param, ...] = (
     ),
     Param(
         "feedforward_ahead",
-        False,
-        "the nominal torque sent with a sample is the plan's at the time the adaptive law "
-        "models its command acting (its input delay later), not at the sample's",
+        True,
+        "the nominal torque sent with a sample is the plan's of the sample over which the "
+        "adaptive law models its command acting (whole samples of its input delay later: "
+        "a driver slower than 1/T), not the sample's own",
     ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),

@@ -475,6 +475,23 @@ class RobotSampler:
             "estimated": "estimated from the driver's positions",
         }.get(self.velocity_kind, self.velocity_kind)
 
+    def samples_late(self, delay_s: float) -> int:
+        """How many whole samples after its sample a command acts that the arm applies
+        ``delay_s`` after it: the sample whose nominal torque it should carry (robot mode's
+        ``feedforward_ahead``).
+
+        Whole samples only: a delay under a sample (a driver faster than 1/T) is the law's to
+        model (its input lags split by it), and shifting the torque by a fraction of a sample
+        moved the physical arms both ways in simulated time (docs/robot.md, "The nominal
+        torque of when a command acts"). A delay measured from the driver's stamps is a whole
+        number of its periods up to their jitter, and the echo keeps a short one
+        (:class:`~apc_feedback.command_echo.CommandEcho`): a quarter of the driver's period
+        more counts, so that 9.9 ms measured on a 100 Hz driver is the sample it is.
+        """
+        if not delay_s > 0.0:
+            return 0
+        return int((delay_s * 1e9 + 0.25 * self.driver_period_ns) // self.period_ns)
+
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""
         return self.newest is not None and now_ns - self.newest.stamp_ns <= self.watchdog_ns

@@ -465,3 +465,24 @@ def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_afte
     assert s.velocity_kind == "driver" and s.velocity_stencil() is None
     s.offer(_state(later + T, q + 0.01), later + T)  # positions only: its own estimate
     assert s.velocity_kind == "estimated"
+
+
+@pytest.mark.parametrize(
+    ("hz", "delays_ms", "samples"),
+    [
+        (100, (0.0, 4.0, 9.9, 10.0, 14.0, 19.9, 20.0), (0, 0, 1, 1, 1, 2, 2)),
+        (250, (4.0, 8.0, 9.9, 12.0), (0, 0, 1, 1)),
+        (1000, (1.0, 9.0, 9.8, 10.0), (0, 0, 1, 1)),
+    ],
+)
+def test_a_command_acts_whole_samples_late_a_stamps_jitter_short_counting(hz, delays_ms, samples):
+    """``samples_late``: the whole samples of T = 10 ms a delay spans, a delay short of one by
+    under a quarter of the driver's period (its stamps' jitter) counting as it; 8 ms on a
+    250 Hz driver is under a sample (the law's lags model it)."""
+    s = _sampler(period=0.01)
+    period_ns = 1_000_000_000 // hz
+    for i in range(5):
+        s.offer(_state(i * period_ns, 0.0, 0.0), i * period_ns)
+    assert s.driver_period_ns == period_ns
+    got = tuple(s.samples_late(d * 1e-3) for d in delays_ms)
+    assert got == samples

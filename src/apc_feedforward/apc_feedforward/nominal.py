@@ -129,18 +129,13 @@ class Feedforward:
         u_n = nominal_torque(self.model, self._data, q, qd, qdd)
         return Setpoint(k=k, t=t, q=q, qd=qd, qdd=qdd, u_n=u_n)
 
-    def acting_later(self, setpoint: Setpoint, delay: float) -> Setpoint:
-        """``setpoint`` (this plan's, sample ``k``) with the nominal torque of the plan
-        ``delay`` s later, linear between its samples: what the arm should get from a command
-        that acts ``delay`` after its sample. Position, velocity and acceleration stay sample
-        ``k``'s (the error is measured there)."""
-        if not delay > 0.0:
+    def acting_later(self, setpoint: Setpoint, samples: int) -> Setpoint:
+        """``setpoint`` (this plan's, sample ``k``) with the nominal torque of sample ``k +
+        samples``: what the arm should get from a command that acts over that sample's
+        interval. Position, velocity and acceleration stay sample ``k``'s (the error is
+        measured there)."""
+        if samples < 0:
+            raise ValueError(f"samples must be >= 0, got {samples}")
+        if samples == 0:
             return setpoint
-        ahead = delay / self.period
-        i = int(np.floor(ahead))
-        f = ahead - i
-        first = setpoint.u_n if i == 0 else self.sample(setpoint.k + i).u_n
-        if f == 0.0:
-            return replace(setpoint, u_n=first)
-        second = self.sample(setpoint.k + i + 1).u_n
-        return replace(setpoint, u_n=(1.0 - f) * first + f * second)
+        return replace(setpoint, u_n=self.sample(setpoint.k + samples).u_n)

@@ -336,19 +336,15 @@ def test_rejoins_do_not_pile_up(robot):
 
 
 def test_the_nominal_torque_of_when_a_command_acts_is_the_plans_that_much_later(robot):
-    """``acting_later``: the torque of the plan ``delay`` later, linear between its samples,
-    with the set point's own position, velocity and acceleration; no delay, no change."""
+    """``acting_later``: the torque of the plan's sample that many samples later, with the set
+    point's own position, velocity and acceleration; none later, no change; never earlier."""
     target = np.deg2rad([60.0, -10.0, 20.0])
     plan = Feedforward(robot.model, FourThreeFour(Q0, target, **MOVE), T, 0)
     sp = plan.sample(30)
-    assert plan.acting_later(sp, 0.0) is sp
-    two = plan.acting_later(sp, 2 * T)
+    assert plan.acting_later(sp, 0) is sp
+    two = plan.acting_later(sp, 2)
     assert_array_equal(two.u_n, plan.sample(32).u_n)
-    assert_array_equal(two.q, sp.q) and two.k == 30
-    between = plan.acting_later(sp, 1.25 * T)
-    np.testing.assert_allclose(
-        between.u_n, 0.75 * plan.sample(31).u_n + 0.25 * plan.sample(32).u_n, rtol=1e-12
-    )
-    within = plan.acting_later(sp, 0.4 * T)
-    np.testing.assert_allclose(within.u_n, 0.6 * sp.u_n + 0.4 * plan.sample(31).u_n, rtol=1e-12)
-    assert not np.allclose(within.u_n, sp.u_n)  # mid-move the torque changes
+    assert_array_equal(two.q, sp.q) and two.k == 30 and two.t == sp.t
+    assert not np.allclose(two.u_n, sp.u_n)  # mid-move the torque changes
+    with pytest.raises(ValueError, match="samples"):
+        plan.acting_later(sp, -1)

@@ -175,7 +175,7 @@ def run_robot_loop(
     missed: float = 0.0,
     missed_seed: int = 0,
     command_first: bool = False,
-    feedforward_ahead: bool = False,
+    feedforward_ahead: bool = True,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -234,8 +234,8 @@ def run_robot_loop(
         Robot mode's ``command_first``: the law's command from the gain planned at the sample
         before (simulated time has no compute time, so only its cost shows here).
     feedforward_ahead : bool
-        Robot mode's ``feedforward_ahead``: the nominal torque of when the law models the
-        command acting.
+        Robot mode's ``feedforward_ahead`` (on, as robot mode's default): the nominal torque of
+        the sample over which the law models the command acting.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
