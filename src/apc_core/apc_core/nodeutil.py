@@ -305,9 +305,10 @@ def destroy_nodes(
     what can be closed (a recorder's file), destroy every node, then shut the context down (the
     default one if ``None``).
 
-    The executor lets go of the nodes first: the events executor keeps using a node's handle
-    (and serves timers from a thread of its own) while the node is added to it, and
-    ``destroy_node`` would then wait for ever in ``destroy_when_not_in_use``.
+    The executor lets go of the nodes first: the events executor keeps using a node's handles
+    (and serves timers from a thread of its own) while the node is added to it, and rclpy's
+    ``destroy_when_not_in_use`` then defers the teardown (with the process's last node, the
+    DDS participant's) to whenever the executor lets go, outside the teardown limit.
     """
     nodes = list(nodes)
     if executor is not None:
@@ -428,8 +429,8 @@ def run_node(
     :func:`make_executor` of ``$APC_EXECUTOR``, ``events`` (rclpy's ``EventsExecutor``, ~2x
     the single-threaded executor's messages per second) unless set to ``single``.
     SIGINT/SIGTERM end the spin and the node is destroyed before ``rclpy`` shuts down; it
-    leaves the executor first (:func:`destroy_nodes`), since with the events executor
-    ``destroy_node`` on a node still added to it can hang after a signal.
+    leaves the executor first (:func:`destroy_nodes`): the events executor holds the handles
+    of a node still added to it.
     ``spin_until(node)`` returning True ends a finite run (e.g. the plant after ``n_samples``)
     with the node's ``exit_code``.
     """
