@@ -112,7 +112,7 @@ def test_a_hold_of_an_odd_number_of_samples_no_longer_loses_the_panda(hold_s):
     assert run.max_tracking_error_deg() < 0.8
     assert run.tracking_error_deg()[-1].max() < 0.05
     ahead = _panda_hold_and_move(hold_s, q_input_change=0.0, alpha_model=1e-3)
-    assert ahead.max_tracking_error_deg() < 0.5
+    assert ahead.max_tracking_error_deg() < 0.4
 
 
 @pytest.mark.parametrize("effect", ["friction", "quantisation"])
@@ -128,7 +128,8 @@ def test_the_panda_held_by_its_friction_on_a_100hz_driver_is_no_longer_lost(effe
     the plan's inputs do not grow while the arm does not answer (``input_ring_limit`` 1) it
     tracks within 0.90 and 0.59 deg with the paper's forgetting, and 0.94 and 0.64 deg as the
     preset ships. All with the nominal torque of the sample's own time (``feedforward_ahead``
-    off; with it, the encoders' run holds within 0.43 deg without the limit too)."""
+    off; with it, measured, the encoders' run holds within 0.43 deg without the limit too, but
+    over the offline grid the limit stays needed: docs/robot.md)."""
     paper_rho = {"rho": paper_settings()["rho"]}
     run = [
         panda_100hz_move(

@@ -13,10 +13,10 @@ One sample ``k``:
    nominal torque of Eqs. 2-8 by Newton-Euler) gives set point ``k``, which depends only on
    time and the goals, so it is sampled here, in the loop, as joint_trajectory_controller
    samples its trajectory in ``update()``: the command never waits for another node;
-3. the law gives ``du(k)`` from the sample and the set point, and the command is
-   ``u_n(k) + du(k)`` in ``command_joints`` order, clipped to the effort limits, sent in the
-   same callback, a fixed time after the state. The feedforward and the feedback stay apart
-   (the paper's structure); the sum happens where both are.
+3. the law gives ``du(k)`` from the sample and the set point, and the command is ``u_n +
+   du(k)`` (``u_n`` of the sample it acts over, ``feedforward_ahead``) in ``command_joints``
+   order, clipped to the effort limits, sent in the same callback, a fixed time after the
+   state. The feedforward and the feedback stay apart; the sum happens where both are.
 
 :meth:`RobotLoop.tick`, called by a timer, is only the watchdog below. The loop keeps the
 sampling's timing (:class:`~apc_feedback.sample_timing.SampleTiming`, ``timing``); the node
@@ -100,7 +100,7 @@ class Step(NamedTuple):
     sample : JointSample or None
         The sample taken (stamped ``kT``), for observers.
     setpoint : Setpoint or None
-        The plan's set point of that sample, for observers.
+        The plan's set point of that sample with the ``u_n`` sent, for observers.
     """
 
     command: np.ndarray | None = None
@@ -419,7 +419,7 @@ class RobotLoop:
         if out.setpoint is None or not self.feedforward_ahead or self._split_delay is None:
             return out.setpoint
         late = self.sampler.samples_late(self._split_delay())
-        return self.plan.feedforward.acting_later(out.setpoint, late)
+        return self.plan.acting_later(out.setpoint, late)
 
     def _law_step(self, sample: JointSample, setpoint: Setpoint) -> Step:
         """The law on ``sample`` and its set point: the command; none when the path tolerance

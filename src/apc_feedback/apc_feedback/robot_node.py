@@ -15,14 +15,17 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
   state for the time kT + phase (the nearest one, carried to that time when the driver's period
   does not divide T), stamped kT. The feedforward's plan, inside this node
   (:class:`apc_feedforward.goals.GoalQueue`, as joint_trajectory_controller samples its
-  trajectory in ``update()``), gives set point k and its nominal torque ``u_n(k)``: the first
+  trajectory in ``update()``), gives set point k and the nominal torque ``u_n`` of the sample
+  its command acts over (``feedforward_ahead``: ``u_n(k + m)`` when it acts m whole samples
+  late, else ``u_n(k)``): the first
   sample holds the measured position (or starts ``move.goal_deg``), goals on
   ``feedforward/trajectory`` (``trajectory_msgs/JointTrajectory``, any joint order) start when
-  the motion before them ends. The command ``u_n(k) + du(k)`` goes out in the same callback as
+  the motion before them ends. The command ``u_n + du(k)`` goes out in the same callback as
   ``std_msgs/Float64MultiArray`` on ``command_topic`` in ``command_joints`` order, clipped to
   the URDF's effort limits, with the QoS forward_command_controller subscribes with
   (``SystemDefaultsQoS``). For observers (a recorder), the sample goes out on
-  ``feedback/sample`` and its set point on ``feedforward/setpoint`` when someone listens;
+  ``feedback/sample`` and its set point on ``feedforward/setpoint`` (its effort the ``u_n``
+  sent) when someone listens;
   goals are taken only while active;
 - ``deactivate`` sends one command holding the arm against gravity at the measured position
   (the controller's model) and then none: forward_command_controller keeps applying the last
@@ -189,8 +192,8 @@ PARAMS: tuple[Param, ...] = (
         "feedforward_ahead",
         True,
         "the nominal torque sent with a sample is the plan's of the sample over which the "
-        "adaptive law models its command acting (whole samples of its input delay later: "
-        "a driver slower than 1/T), not the sample's own",
+        "adaptive law models its command acting (whole samples of its input delay later: a "
+        "driver period of about T or more), not the sample's own",
     ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),

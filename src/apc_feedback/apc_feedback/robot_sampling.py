@@ -476,9 +476,9 @@ class RobotSampler:
         }.get(self.velocity_kind, self.velocity_kind)
 
     def samples_late(self, delay_s: float) -> int:
-        """How many whole samples after its sample a command acts that the arm applies
-        ``delay_s`` after it: the sample whose nominal torque it should carry (robot mode's
-        ``feedforward_ahead``).
+        """The whole samples from a sample to the one whose interval its command, applied
+        ``delay_s`` after the sample, acts over: the sample whose nominal torque the command
+        should carry (robot mode's ``feedforward_ahead``).
 
         Whole samples only: a delay under a sample (a driver faster than 1/T) is the law's to
         model (its input lags split by it), and shifting the torque by a fraction of a sample
@@ -486,7 +486,10 @@ class RobotSampler:
         torque of when a command acts"). A delay measured from the driver's stamps is a whole
         number of its periods up to their jitter, and the echo keeps a short one
         (:class:`~apc_feedback.command_echo.CommandEcho`): a quarter of the driver's period
-        more counts, so that 9.9 ms measured on a 100 Hz driver is the sample it is.
+        more counts, so that 9.9 ms measured on a 100 Hz driver is the sample it is (and a
+        driver of over 100 Hz whose period is over half of T, which robot mode warns about,
+        rounds up: 8.3 ms at 120 Hz counts as a sample). No slack before the driver's period
+        is known, which a start waits for.
         """
         if not delay_s > 0.0:
             return 0

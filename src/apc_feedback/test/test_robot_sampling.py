@@ -475,7 +475,7 @@ def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_afte
         (1000, (1.0, 9.0, 9.8, 10.0), (0, 0, 1, 1)),
     ],
 )
-def test_a_command_acts_whole_samples_late_a_stamps_jitter_short_counting(hz, delays_ms, samples):
+def test_a_delay_short_of_whole_samples_by_jitter_counts_as_them(hz, delays_ms, samples):
     """``samples_late``: the whole samples of T = 10 ms a delay spans, a delay short of one by
     under a quarter of the driver's period (its stamps' jitter) counting as it; 8 ms on a
     250 Hz driver is under a sample (the law's lags model it)."""

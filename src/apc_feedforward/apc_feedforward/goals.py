@@ -14,7 +14,7 @@ counters and log lines.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Generic, TypeVar
 
 import numpy as np
@@ -170,6 +170,9 @@ class GoalQueue:
         self.queued: list[wire.TrajectoryGoal] = []
         self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
         self._stop_plan: Trajectory | None = None  # the plan of the last stop()
+        # The next queued goal as planned from the current motion's end (acting_later):
+        # (that goal, the motion's end sample, its plan), or None.
+        self._next_plan: tuple[wire.TrajectoryGoal, int, Feedforward] | None = None
 
     @classmethod
     def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> GoalQueue:
@@ -315,6 +318,31 @@ class GoalQueue:
             except ValueError as exc2:
                 out.failed = exc2
         return out
+
+    def acting_later(self, setpoint: Setpoint, samples: int) -> Setpoint:
+        """``setpoint`` (sample ``k``, just sampled) with the nominal torque of sample ``k +
+        samples`` as the plan will run it: where that is past the current motion's end and a
+        goal is queued, the goal's as :meth:`sample` will start it there (planned from the
+        motion's end); sample ``k``'s own where that torque cannot be computed (the plan's own
+        fault shows at its own sample)."""
+        ff = self.feedforward
+        if samples == 0 or ff is None:
+            return setpoint
+        later = setpoint.k + samples
+        try:
+            if not self.queued or later < ff.end_k():
+                return ff.acting_later(setpoint, samples)
+            goal, end = self.queued[0], ff.end_k()
+            cached = self._next_plan
+            if cached is None or cached[0] is not goal or cached[1] != end:
+                start = ff.trajectory.sample(ff.trajectory.duration)[0]
+                plan = self._plan(start, goal)
+                self._check_plan(plan)  # as _advance does: a goal it refuses starts nothing
+                self._next_plan = (goal, end, Feedforward(self.model, plan, self.period, end))
+            u_n = self._next_plan[2].sample(later).u_n
+        except ValueError:  # FeedforwardError, TrajectoryError
+            return setpoint
+        return replace(setpoint, u_n=u_n)
 
     def _compute(
         self, k: int, position: np.ndarray, render: Callable[[Setpoint], R], out: Sampled[R]

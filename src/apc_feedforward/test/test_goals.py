@@ -344,7 +344,31 @@ def test_the_nominal_torque_of_when_a_command_acts_is_the_plans_that_much_later(
     assert plan.acting_later(sp, 0) is sp
     two = plan.acting_later(sp, 2)
     assert_array_equal(two.u_n, plan.sample(32).u_n)
-    assert_array_equal(two.q, sp.q) and two.k == 30 and two.t == sp.t
     assert not np.allclose(two.u_n, sp.u_n)  # mid-move the torque changes
+    assert two.k == 30 and two.t == sp.t
+    for name in ("q", "qd", "qdd"):
+        assert_array_equal(getattr(two, name), getattr(sp, name))
     with pytest.raises(ValueError, match="samples"):
         plan.acting_later(sp, -1)
+
+
+def test_the_torque_of_when_a_command_acts_past_a_moves_end_is_the_next_goals(robot):
+    """``GoalQueue.acting_later`` past the current motion's end: with a goal queued, the
+    torque of that goal's plan as :meth:`GoalQueue.sample` starts it there, not the finished
+    move's rest; none queued, the rest at the move's end."""
+    target, next_q = Q0 + 0.2, Q0 + 0.3
+    q = queue(robot, first_goal=target)
+    q.sample(0, Q0, keep)
+    end = q.feedforward.end_k()
+    sp = q.sample(end - 1, Q0, keep).setpoint
+    rest = q.acting_later(sp, 2).u_n
+    assert_array_equal(rest, q.feedforward.sample(end + 1).u_n)
+    q.add(goal([0.5], [next_q]))
+    ahead = q.acting_later(sp, 2)
+    assert ahead.k == end - 1 and ahead.q is sp.q
+    assert np.abs(ahead.u_n - rest).max() > 1.0  # the next goal accelerates from the start
+    assert_array_equal(ahead.u_n, q.acting_later(sp, 2).u_n)  # its plan kept, not redone
+    assert len(q.queued) == 1  # looking ahead starts nothing
+    for k in range(end, end + 2):
+        q.sample(k, Q0, keep)
+    assert_array_equal(ahead.u_n, q.sample(end + 1, Q0, keep).setpoint.u_n)
