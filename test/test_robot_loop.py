@@ -917,11 +917,27 @@ def test_a_driver_whose_period_does_not_divide_t_gets_the_period_that_would(
         assert warned[0].endswith(f"({advice})")
 
 
+def _steps_of(loop, steps: list) -> None:
+    """Record every step with a command and the plan's own set point of its sample."""
+    on_joint_state = loop.on_joint_state
+
+    def recorded(state, now_ns):
+        step = on_joint_state(state, now_ns)
+        if step.command is not None:
+            own = loop.plan.feedforward.sample(step.setpoint.k)
+            steps.append((step, own, loop.plan.feedforward.sample(step.setpoint.k + 1)))
+        return step
+
+    loop.on_joint_state = recorded
+
+
 def test_the_nominal_torque_of_when_a_command_acts_ends_the_move_closer():
     """``feedforward_ahead``: on a 100 Hz driver, positions only, a command acts a period after
     its sample; the nominal torque of that time, not of the sample's, ends the ideal Panda's
-    move within 0.2 deg, which the sample's misses (simulated time)."""
+    move within 0.2 deg, which the sample's misses (simulated time). The set point given for
+    observers is sample k's with the torque sent: ``u_n(k + 1)``."""
     arm = arm_scenario("panda", "c")
+    steps: list = []
 
     def move_end_deg(ahead: bool) -> float:
         run = run_robot_loop(
@@ -932,8 +948,37 @@ def test_the_nominal_torque_of_when_a_command_acts_ends_the_move_closer():
             payload_kg=arm.payload_kg,
             arm=arm,
             feedforward_ahead=ahead,
+            setup=(lambda loop: _steps_of(loop, steps)) if ahead else None,
         )
         assert "supervisor.handovers" not in run.counts
         return float(run.tracking_error_at_move_end_deg().max())
 
     assert move_end_deg(True) < 0.2 < move_end_deg(False)
+    moving = [(step, own, next_) for step, own, next_ in steps if own.qd.any()]
+    assert len(moving) > 90
+    for step, own, next_ in moving:
+        np.testing.assert_array_equal(step.setpoint.q, own.q)
+        np.testing.assert_array_equal(step.setpoint.u_n, next_.u_n)
+
+
+def test_a_command_acting_within_its_sample_carries_its_own_nominal_torque():
+    """At 250 Hz (T = 10 ms) a command acts 4-8 ms after its sample, within it: the commands
+    are the same bit for bit with ``feedforward_ahead`` on or off (the law's lags model it)."""
+    arm = arm_scenario("panda", "c")
+
+    def commands(ahead: bool) -> list:
+        steps: list = []
+        run_robot_loop(
+            1.6,
+            goal_deg=arm.q_goal_deg,
+            driver_ms=4.0,
+            phase_ms=1.5,
+            payload_kg=arm.payload_kg,
+            arm=arm,
+            feedforward_ahead=ahead,
+            setup=lambda loop: _steps_of(loop, steps),
+        )
+        return [step.command.tolist() for step, _, _ in steps]
+
+    on = commands(True)
+    assert len(on) > 150 and on == commands(False)
