@@ -57,11 +57,12 @@ def test_at_100_hz_the_prior_of_the_estimated_velocity_holds_the_panda():
     """A 100 Hz driver that sends no velocity: robot mode's parabola spans two periods and the
     command acts one period late. With the prior in the sample's coordinates (the law told the
     estimate's stencil, as robot mode tells it) the law alone tracks the move (measured
-    0.57 deg with the preset's ``input_ring_limit``, 0.45 deg without it); with Eq. 33's split
+    0.52 deg with the preset's ``input_ring_limit``, 0.41 deg without it); with Eq. 33's split
     taking the estimate for the velocity it leaves its path where the input change's weight is
-    not raised as well (``input_ring_limit`` 0: aborted at the path tolerance, 12.4 deg, where
-    the arm brought to rest at once is lost, 1171 deg; with it the wrong prior tracks within
-    0.62 deg)."""
+    not raised as well (``input_ring_limit`` 0: aborted at the path tolerance, 13.7 deg, where
+    the arm brought to rest at once is lost; with it the wrong prior tracks within 0.58 deg).
+    With ``feedforward_ahead`` off: 0.57 and 0.45 deg, 12.4 deg (1171 deg at once) and
+    0.62 deg."""
     assert _panda_move(100, False).max_tracking_error_deg() < 1.0
 
     def velocity_as_measured(loop):

@@ -561,10 +561,10 @@ def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_
     """The physical Panda in MuJoCo on a 100 Hz driver whose cycle is 10.00013 ms (a wall
     clock's rate is never the nominal one) and whose drive adds a cycle: its effort shows
     20.00026 ms, which with the drive's differenced velocity is three input lags, and the law
-    restarts with it as at 10 ms exactly (2.1 deg, no hand-over). Before the lag count had its
-    slack the delay asked for a fourth lag, was not told, and the law, left with the 10 ms an
-    early echo had shown, was handed over 0.17 s in (6.0 deg; on wall time the same cell
-    handed over in every run)."""
+    restarts with it as at 10 ms exactly (2.0 deg, no hand-over; 2.1 with ``feedforward_ahead``
+    off). Before the lag count had its slack the delay asked for a fourth lag, was not told,
+    and the law, left with the 10 ms an early echo had shown, was handed over 0.17 s in (6.0
+    deg; on wall time the same cell handed over in every run)."""
     from support.panda import panda_100hz_move
 
     from apc_feedback.supervisor import SupervisorConfig
@@ -753,9 +753,10 @@ def test_a_burst_of_late_commands_from_activation_is_told_and_then_what_the_driv
     """The Panda of the test above, ``late`` commands a cycle late from the ``first`` on (a
     controller warming up at activation). 12 ms, a whole sample, is the first measurement,
     told at once; the echoes then move to 8 ms, disagreeing for a window, and 8 ms is told
-    once they agree: two tells, the arm held (measured 0.41 / 0.73 deg). Told the driver
-    period at once while they disagreed, the law restarted a third time within 11-13 samples
-    and lost the arm (12.9 / 79.2 deg)."""
+    once they agree: two tells, the arm held (measured 0.41 / 0.65 deg; 0.41 / 0.73 with
+    ``feedforward_ahead`` off, which while 12 ms is told sends the nominal torque of the
+    sample itself, not of the next). Told the driver period at once while they disagreed, the
+    law restarted a third time within 11-13 samples and lost the arm (12.9 / 79.2 deg)."""
     from support.panda import physical_panda_move
 
     from apc_lab.robot_offline import Latency

@@ -438,7 +438,8 @@ def test_the_law_keeps_the_physical_puma_within_1_deg_on_250hz_to_1khz_drivers(r
 def test_without_its_rotor_inertia_the_law_alone_loses_the_physical_puma_on_a_100hz_driver():
     """The controllers' model without the drives' G^2 Jm (3-5 times the links' inertia on
     joints 2 and 3): the prior's input gain is that much too large and the slow model keeps it
-    (measured 13.7 / 12.0 / 11.9 deg over the three payloads; told, 2.4-2.5 deg)."""
+    (measured 11.5 / 12.6 / 11.5 deg over the three payloads; told, 1.6-1.7 deg; with
+    ``feedforward_ahead`` off, 13.7 / 12.0 / 11.9 and 2.4-2.5 deg)."""
     assert max(_physical(100, payload, told=False)[0] for payload in PAYLOADS_KG) > 10.0
 
 
@@ -461,11 +462,12 @@ def test_on_a_100hz_driver_the_law_holds_the_physical_puma_once_the_drives_delay
     """A command acts two driver periods after its state (the driver's cycle and the drive's
     own) and the velocity is the drive's difference: robot mode measures the delay from the
     driver's effort and the law models it with the split held (before, the law alone lost the
-    arm in every run: 121-366 deg). Measured, the rotor inertia told: the law alone 2.4 / 2.5 /
-    2.5 deg; supervised, the saturation trigger hands over in every run (0.37 s in), computed
-    torque then reaching 2.6-2.7 deg and the PID 2.1 (not told: computed torque's sag at the
-    gains a 100 Hz driver allows took the arm to 11.6-11.7 deg): docs/robot.md, "When the arm
-    applies a command"."""
+    arm in every run: 121-366 deg). Measured, the rotor inertia told: the law alone 1.6 / 1.6 /
+    1.7 deg, and supervised nothing hands over (the same runs, with either fallback); not told,
+    computed torque's sag at the gains a 100 Hz driver allows takes the arm to 11.5-11.7 deg.
+    With ``feedforward_ahead`` off the law alone reaches 2.4 / 2.5 / 2.5 deg and supervised the
+    saturation trigger hands over in every run (0.37 s in), computed torque then reaching
+    2.6-2.7 deg and the PID 2.1: docs/robot.md, "When the arm applies a command"."""
     for payload in PAYLOADS_KG:
         assert _physical(100, payload)[0] < 3.0
         for fallback in ("computed_torque", "pid"):
@@ -478,11 +480,13 @@ def test_the_fallback_holds_the_panda_whose_commands_ring_on_a_100hz_driver_with
     the 5 lb move (0.99 of the payload, one of ``bench/slow_driver_effects.py``'s runs), the
     input change's weight not raised (``input_ring_limit`` 0): the law's own commands ring at
     the Nyquist frequency from the move's end and, with ŵ forgetting as fast as the paper's
-    ``rho`` 0.95 lets it, the law alone loses the arm (measured 4146 deg; docs/robot.md,
-    "Commands that grow while the arm does not answer": with the preset's limit it tracks
-    within 0.64 deg; with the preset's slower forgetting, 0.99, it tracks within 0.50 deg
-    without the limit); supervised, the tracking-error trigger hands over (twice, one
-    hand-back) and the arm stays within 10 deg (measured 6.5)."""
+    ``rho`` 0.95 lets it, the law alone loses the arm (measured 6771 deg; docs/robot.md,
+    "Commands that grow while the arm does not answer": as the preset ships, its limit and
+    forgetting, it tracks within 0.59 deg; with the preset's slower forgetting, 0.99, and no
+    limit it is lost too, 3070 deg); supervised, the tracking-error trigger hands over (twice,
+    one hand-back) and the arm stays within 10 deg (measured 4.8). With ``feedforward_ahead``
+    off: 4146 deg alone, 0.64 deg as shipped, 0.50 deg with 0.99 and no limit, 6.5 deg
+    supervised."""
     run = panda_100hz_move(
         payload_kg=0.99 * PANDA.payload_kg,
         effects=ArmEffects(),
