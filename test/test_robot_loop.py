@@ -8,7 +8,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from support.panda import PANDA
+from support.panda import PANDA, panda_100hz_move
 from support.plans import HOLD_U_N, ScriptedPlan
 
 from apc_core.robot import PAPER_GOAL_DEG
@@ -18,7 +18,6 @@ from apc_feedback.linearize import VelocityStencil
 from apc_feedback.robot_loop import NOTHING, STOP_TIME_S, RobotLoop
 from apc_feedback.robot_sampling import DIFFERENCE_STATES, RobotSamplingConfig
 from apc_feedforward.nominal import Setpoint
-from apc_lab.robot_compare import arm_scenario
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.scenario import recommended_settings
 from apc_msgs_py import JointSample, TrajectoryGoal
@@ -565,8 +564,6 @@ def test_a_driver_a_little_slower_than_its_rate_still_tells_the_law_its_drive_s_
     off). Before the lag count had its slack the delay asked for a fourth lag, was not told,
     and the law, left with the 10 ms an early echo had shown, was handed over 0.17 s in (6.0
     deg; on wall time the same cell handed over in every run)."""
-    from support.panda import panda_100hz_move
-
     from apc_feedback.supervisor import SupervisorConfig
     from apc_lab.robot_compare import ARM_EFFECTS
 
@@ -809,14 +806,7 @@ def test_a_runs_error_at_a_time_is_at_the_sample_whose_state_comes_then():
     with pytest.raises(ValueError, match="period"):
         RobotRun(np.zeros(2), log, activated_ns=50 * s).tracking_error_at_deg(0.02)
 
-    from apc_lab.robot_compare import arm_scenario
-    from apc_lab.robot_offline import run_robot_loop
-
-    arm = arm_scenario("panda", "c")
-    ideal = run_robot_loop(
-        2.5, goal_deg=arm.q_goal_deg, driver_ms=10.0, phase_ms=3.7, payload_kg=arm.payload_kg,
-        arm=arm,
-    )  # fmt: skip
+    ideal = panda_100hz_move(2.5)
     assert 0.15 < ideal.tracking_error_at_move_end_deg()[4] < 0.2
     # The move ends 1.2 s after activation (its 0.2 s hold and 1.0 s from the first sample).
     assert (ideal.tracking_error_at_deg(1.2) == ideal.tracking_error_at_move_end_deg()).all()
@@ -937,17 +927,11 @@ def test_the_nominal_torque_of_when_a_command_acts_ends_the_move_closer():
     its sample; the nominal torque of that time, not of the sample's, ends the ideal Panda's
     move within 0.2 deg, which the sample's misses (simulated time). The set point given for
     observers is sample k's with the torque sent: ``u_n(k + 1)``."""
-    arm = arm_scenario("panda", "c")
     steps: list = []
 
     def move_end_deg(ahead: bool) -> float:
-        run = run_robot_loop(
+        run = panda_100hz_move(
             2.5,
-            goal_deg=arm.q_goal_deg,
-            driver_ms=10.0,
-            phase_ms=3.7,
-            payload_kg=arm.payload_kg,
-            arm=arm,
             feedforward_ahead=ahead,
             setup=(lambda loop: _steps_of(loop, steps)) if ahead else None,
         )
@@ -965,17 +949,13 @@ def test_the_nominal_torque_of_when_a_command_acts_ends_the_move_closer():
 def test_a_command_acting_within_its_sample_carries_its_own_nominal_torque():
     """At 250 Hz (T = 10 ms) a command acts 4-8 ms after its sample, within it: the commands
     are the same bit for bit with ``feedforward_ahead`` on or off (the law's lags model it)."""
-    arm = arm_scenario("panda", "c")
 
     def commands(ahead: bool) -> list:
         steps: list = []
-        run_robot_loop(
+        panda_100hz_move(
             1.6,
-            goal_deg=arm.q_goal_deg,
             driver_ms=4.0,
             phase_ms=1.5,
-            payload_kg=arm.payload_kg,
-            arm=arm,
             feedforward_ahead=ahead,
             setup=lambda loop: _steps_of(loop, steps),
         )
