@@ -219,6 +219,12 @@ class GoalQueue:
             accelerations=goal.accelerations,
         )
 
+    def _plan_after(self, ff: Feedforward, goal: wire.TrajectoryGoal) -> Trajectory:
+        """``goal`` planned from the end of ``ff``'s motion and checked (ValueError: refused)."""
+        plan = self._plan(ff.trajectory.sample(ff.trajectory.duration)[0], goal)
+        self._check_plan(plan)
+        return plan
+
     def _check_limits(self, positions: np.ndarray) -> None:
         """Refuse waypoints outside the URDF's joint position limits."""
         lower, upper = self.position_limits
@@ -335,9 +341,7 @@ class GoalQueue:
             goal, end = self.queued[0], ff.end_k()
             cached = self._next_plan
             if cached is None or cached[0] is not goal or cached[1] != end:
-                start = ff.trajectory.sample(ff.trajectory.duration)[0]
-                plan = self._plan(start, goal)
-                self._check_plan(plan)  # as _advance does: a goal it refuses starts nothing
+                plan = self._plan_after(ff, goal)  # a goal _advance refuses raises here too
                 self._next_plan = (goal, end, Feedforward(self.model, plan, self.period, end))
             u_n = self._next_plan[2].sample(later).u_n
         except ValueError:  # FeedforwardError, TrajectoryError
@@ -368,10 +372,8 @@ class GoalQueue:
         ff = self.feedforward
         while self.queued and ff is not None and k >= ff.end_k():
             goal = self.queued.pop(0)
-            start = ff.trajectory.sample(ff.trajectory.duration)[0]
             try:
-                plan = self._plan(start, goal)
-                self._check_plan(plan)
+                plan = self._plan_after(ff, goal)
             except ValueError as exc:  # TrajectoryError, or a plan that cannot be published
                 out.refused.append(exc)
                 continue
