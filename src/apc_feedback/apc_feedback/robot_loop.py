@@ -371,7 +371,7 @@ class RobotLoop:
         """Robot mode learnt something of the driver since the start that the law models: the
         samples' velocity is another kind (that the driver's velocity is the backward
         difference of its positions takes states in motion to tell,
-        :class:`~apc_feedback.robot_sampling.DifferenceCheck`), or the driver's effort shows
+        :class:`~apc_feedback.joint_velocity.DifferenceCheck`), or the driver's effort shows
         another delay to the arm applying a command (``delay_moved``: judged once a sample,
         :meth:`~apc_feedback.delay_telling.DelayTelling.moved`). Counted and logged; a law
         that models its samples is told and, if it commands, restarts its identification from

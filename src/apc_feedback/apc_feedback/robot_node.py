@@ -56,12 +56,14 @@ a cycle, ``input_delay_changes`` counting the switches), ``law.input_lags`` and
 "at its cap" where the limit is out of reach); and what the
 samples' velocity is, ``velocity_kind``: ``driver`` (taken as the arm's), ``difference`` (the
 driver's backward difference of its positions, found from its states in motion: the law then
-models its lag, restarting its identification once, ``velocity_kind_changes``) or
-``estimated`` (from positions, for a driver that sends none); and ``command_applied_ms``, the
-delay from a state to the arm applying the command computed from it, as the driver's effort
-shows it (:class:`apc_feedback.command_echo.CommandEcho`; ``unknown`` for a driver whose effort
-is a measured torque or that sends none), which the law models from a sample on
-(``measured_delay_changes``).
+models its lag, restarting its identification once, ``velocity_kind_changes``),
+``sample_estimate`` (a drive's difference over a short span, at most ``short_difference`` of T:
+a 1 kHz drive at T = 10 ms, replaced by the estimate from its positions over T, whose quantised
+counts then chatter less) or ``estimated`` (from positions, for a driver that sends none);
+and ``command_applied_ms``, the delay from a state to the arm applying the command computed
+from it, as the driver's effort shows it (:class:`apc_feedback.command_echo.CommandEcho`;
+``unknown`` for a driver whose effort is a measured torque or that sends none), which the law
+models from a sample on (``measured_delay_changes``).
 """
 
 from __future__ import annotations
@@ -251,7 +253,10 @@ class RobotNode(LifecycleNode):
         try:
             sampling = RobotSamplingConfig(
                 period=values["period"],
-                **{f: values[f] for f in ("max_age", "watchdog", "velocity_window")},
+                **{
+                    f: values[f]
+                    for f in ("max_age", "watchdog", "velocity_window", "short_difference")
+                },
             )
         except RobotSamplingError as exc:
             raise ConfigError(f"parameter '{exc.field}': {exc}") from None

@@ -35,15 +35,11 @@ The last two leave a gap in ``k``; the adaptive law skips its identification ste
 gap (Eq. 16 describes a one-period transition). Without states the sampler takes nothing; the
 caller's watchdog (:meth:`RobotSampler.fresh`) notices.
 
-Velocity, when the driver sends none (``velocity`` empty), is estimated from the driver's
-positions: the parabola through the newest state, the newest one at least ``velocity_window``
-before it (the base) and the one nearest the middle, differentiated at the newest stamp (with
-a window of 0: the last three states). What it costs: no lag for a constant acceleration (the
-error grows with the jerk j, about ``j a b / 6`` for states ``a`` and ``b`` seconds back), where
-a two-point backward difference lags by half its span; and noise: evenly spaced over a span
-``w``, position noise ``sigma`` becomes ``sqrt(26) sigma / w`` of velocity noise (the two-point
-difference: ``sqrt(2) sigma / w``), an encoder count ``c`` a velocity step up to ``4 c / w``,
-so quantised positions need the drive's own velocity (docs/robot.md has what each measured).
+Velocity, when the driver sends none, is estimated from its positions; a drive's velocity is
+checked for being the backward difference of its positions (:mod:`apc_feedback.joint_velocity`),
+and one differenced over a short span (at most ``short_difference`` of ``T``: a 1 kHz drive at
+T = 10 ms) is replaced by the estimate from its positions over ``T``
+(:meth:`RobotSampler._short_difference` says why).
 """
 
 from __future__ import annotations
@@ -53,10 +49,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
 
-import numpy as np
-
 from apc_core.params import SettingError, check_settings, setting
 from apc_core.robot import PAPER_PERIOD_S
+from apc_feedback.joint_velocity import DifferenceCheck, VelocityEstimator
 from apc_feedback.linearize import VelocityStencil
 from apc_msgs_py import JointSample, WireError, seconds_to_ns
 
@@ -82,7 +77,7 @@ class RobotSamplingConfig:
     ----------
     period : float
         Sample period T.
-    max_age, watchdog, velocity_window :
+    max_age, watchdog, velocity_window, short_difference :
         See their descriptions; ``watchdog >= max_age``.
     """
 
@@ -105,6 +100,13 @@ class RobotSamplingConfig:
         0.0,
         1.0,
     )
+    short_difference: float = setting(
+        0.15,
+        "a drive's velocity differenced over at most this fraction of T is replaced by an "
+        "estimate from its positions over T (0: never)",
+        0.0,
+        1.0,
+    )
 
     def __post_init__(self) -> None:
         check_settings(self, RobotSamplingError)
@@ -115,190 +117,6 @@ class RobotSamplingConfig:
                 f"watchdog must be >= max_age ({self.max_age} s), got {self.watchdog}",
                 field="watchdog",
             )
-
-
-class VelocityEstimator:
-    """Velocity from positions: a parabola over ``window_ns`` (see the module docstring).
-
-    :attr:`acceleration` is the parabola's (None before three states).
-    """
-
-    def __init__(self, window_ns: int) -> None:
-        self.window_ns = int(window_ns)
-        self._history: deque[tuple[int, np.ndarray]] = deque()
-        self.acceleration: np.ndarray | None = None
-        self._estimated = True  # the newest state's acceleration is known
-
-    def reset(self) -> None:
-        self._history.clear()
-        self.acceleration = None
-        self._estimated = True
-
-    def update(self, stamp_ns: int, position: np.ndarray) -> np.ndarray | None:
-        """Add a state (stamps strictly increasing); its velocity, None for the first."""
-        self.add(stamp_ns, position)
-        return self._estimate()
-
-    def add(self, stamp_ns: int, position: np.ndarray) -> None:
-        """Add a state (stamps strictly increasing) without estimating at it: for a driver
-        that sends its velocity, whose states need the estimate's acceleration only when one
-        is carried to its sample's time (:meth:`newest_acceleration`)."""
-        history = self._history
-        history.append((stamp_ns, position))
-        # Keep one state at least a window old (the base) and everything after it.
-        while len(history) > 3 and stamp_ns - history[1][0] >= self.window_ns:
-            history.popleft()
-        self.acceleration, self._estimated = None, False
-
-    def stencil(self, period_ns: int) -> VelocityStencil:
-        """The estimate as weights on past positions for states ``period_ns`` apart (a steady
-        driver): what the adaptive law's prior models (its ``expect_velocity_stencil``).
-
-        Read off this estimator's own rule: positions that are unit vectors, one per state, give
-        each state's weight as the velocity's entry.
-        """
-        if period_ns <= 0:
-            raise ValueError(f"period_ns must be > 0, got {period_ns}")
-        states = max(3, -(-self.window_ns // period_ns) + 2)
-        probe = VelocityEstimator(self.window_ns)
-        unit = np.eye(states)
-        for i in range(states - 1):
-            probe.add(i * period_ns, unit[i])
-        weights = probe.update((states - 1) * period_ns, unit[-1])
-        assert weights is not None
-        used = [i for i in range(states) if weights[i] != 0.0]
-        return VelocityStencil(
-            tuple((states - 1 - i) * period_ns * 1e-9 for i in used),
-            tuple(float(weights[i]) for i in used),
-        )
-
-    def newest_acceleration(self) -> np.ndarray | None:
-        """The parabola's acceleration at the newest state (None before three states)."""
-        if not self._estimated:
-            self._estimate()
-        return self.acceleration
-
-    def _estimate(self) -> np.ndarray | None:
-        """The velocity at the newest state (None for the first); sets :attr:`acceleration`."""
-        self._estimated = True
-        history = self._history
-        stamp_ns, position = history[-1]
-        t2, q2 = history[0]
-        if t2 == stamp_ns:
-            return None
-        if len(history) == 2:
-            return (position - q2) / ((stamp_ns - t2) * 1e-9)
-        # The parabola through the base, the state nearest the middle and the newest one,
-        # differentiated at the newest: no lag for a constant acceleration.
-        if len(history) == 3:  # the last three states (a window of 0, or the states spread)
-            t1, q1 = history[1]
-        else:
-            middle = (t2 + stamp_ns) / 2
-            t1, q1 = min(list(history)[1:-1], key=lambda entry: abs(entry[0] - middle))
-        a, b = (stamp_ns - t1) * 1e-9, (stamp_ns - t2) * 1e-9
-        velocity, self.acceleration = _parabola(position, q1, q2, a, b)
-        return velocity
-
-
-#: Informative states in a row whose velocity is their positions' backward difference before
-#: the driver's velocity is taken as one (:class:`DifferenceCheck`).
-DIFFERENCE_STATES = 10
-#: How closely the periods a differenced velocity implies agree (relative): a double's rounding
-#: of ``(q - q_prev) / P`` moves them by a few parts in 1e16; an arm's own velocity misses by
-#: its acceleration over half a period, or by a whole encoder count.
-DIFFERENCE_TOLERANCE = 1e-6
-
-
-class DifferenceCheck:
-    """Whether the driver's velocity is the backward difference of its positions.
-
-    Many drives report ``(q(t) - q(t - P)) / P`` of their encoder (robot_sim's
-    ``velocity_source: difference``): a velocity half a period behind the arm's, which the
-    adaptive law's prior models once it is told the stencil (the same lag robot mode's own
-    estimate has, over one period instead of two). The driver does not say; its states do. A
-    state is informative when some joint moved or has a velocity; then every joint with a
-    position change must have a velocity of the same sign, every joint without one none, and
-    each moving joint's ``Δq / v`` is the period it was differenced over: the same on every joint,
-    within half to twice the stamps' interval. :data:`DIFFERENCE_STATES` informative states in a
-    row that agree make it a difference over their median period; one that does not, or states
-    gone for longer than the watchdog (:meth:`reset`), makes it a velocity of the arm's again.
-    States that say nothing (the arm at rest: every position and velocity unchanged at zero)
-    change nothing, and so does a state that follows a missed one (its interval not within half
-    a period of the driver's): its change spans two cycles where the drive's difference spans
-    one, so it is no evidence either way. A driver on a loaded machine misses cycles (robot_sim
-    at 1 kHz on wall time: 1-3 % of them); judged, each missed cycle made the drive's difference
-    the arm's velocity and ten states later a difference again, each change a restart of the
-    adaptive law. A drive that
-    differences in single precision or filters its difference is taken as measuring the arm's
-    velocity (the law is then not told a stencil: robot mode's behaviour without the check).
-    :attr:`refuted`: since the last reset a state has shown a velocity that is no difference.
-    """
-
-    def __init__(self) -> None:
-        self._periods: deque[float] = deque(maxlen=DIFFERENCE_STATES)
-        self.period_s: float | None = None  # the period the velocity differences over, or None
-        self.refuted = False  # a state showed a velocity that is no difference (since reset)
-
-    def reset(self) -> None:
-        self._periods.clear()
-        self.period_s = None
-        self.refuted = False
-
-    def add(
-        self, change: np.ndarray, velocity: np.ndarray, interval_ns: int, driver_period_ns: int = 0
-    ) -> None:
-        """A state's position change since the previous state (``interval_ns`` before it) and
-        its velocity; ``driver_period_ns``: the driver's period as known so far (0: not yet)."""
-        moved, reported = change != 0.0, velocity != 0.0
-        if not (moved.any() or reported.any()):
-            return
-        if driver_period_ns > 0 and 2 * abs(interval_ns - driver_period_ns) > driver_period_ns:
-            return  # after a missed state (or an early one): not one cycle's change
-        period = self._period(change, velocity, moved, reported, interval_ns * 1e-9)
-        if period is None:
-            self.reset()
-            self.refuted = True
-            return
-        self._periods.append(period)
-        if len(self._periods) == DIFFERENCE_STATES:
-            self.period_s = float(np.median(self._periods))
-            self.refuted = False
-
-    @staticmethod
-    def _period(
-        change: np.ndarray,
-        velocity: np.ndarray,
-        moved: np.ndarray,
-        reported: np.ndarray,
-        interval_s: float,
-    ) -> float | None:
-        """The period every joint's velocity differences its change over, or None."""
-        if not np.array_equal(moved, reported):
-            return None
-        periods = change[moved] / velocity[moved]
-        period = float(periods[0])
-        if not (0.5 * interval_s <= period <= 2.0 * interval_s):
-            return None
-        if np.any(np.abs(periods - period) > DIFFERENCE_TOLERANCE * period):
-            return None
-        return period
-
-
-def _parabola(
-    q0: np.ndarray, q1: np.ndarray, q2: np.ndarray, a: float, b: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity and acceleration at ``q0`` of the parabola through ``q0`` (now), ``q1`` (``a``
-    s before) and ``q2`` (``b`` s before), per joint.
-
-    Plain Python per entry: for a joint state's few entries it is quicker than numpy's fourteen
-    array operations, with the same arithmetic in the same order (the same bits).
-    """
-    ab, a_ba, b_ba, a_b = a * b, a * (b - a), b * (b - a), a + b
-    velocity, acceleration = [], []
-    for x0, x1, x2 in zip(q0.tolist(), q1.tolist(), q2.tolist(), strict=True):
-        velocity.append(x0 * a_b / ab - x1 * b / a_ba + x2 * a / b_ba)
-        acceleration.append(2.0 * (x0 / ab - x1 / a_ba + x2 / b_ba))
-    return np.array(velocity), np.array(acceleration)
 
 
 class Take(NamedTuple):
@@ -357,6 +175,9 @@ class RobotSampler:
         self.max_age_ns = seconds_to_ns(config.max_age)
         self.watchdog_ns = seconds_to_ns(config.watchdog)
         self.velocity = VelocityEstimator(seconds_to_ns(config.velocity_window))
+        # Over a sample's span: in place of a drive's short difference (velocity_kind).
+        self.sample_velocity = VelocityEstimator(self.period_ns)
+        self.short_difference_s = config.short_difference * config.period
         self.newest: JointSample | None = None  # with a velocity (measured or estimated)
         self.velocity_estimated = False  # the newest state came without a velocity
         self.difference = DifferenceCheck()  # whether the driver's velocity differences positions
@@ -404,6 +225,7 @@ class RobotSampler:
                 # After a gap in the states a parabola through positions from before it is no
                 # velocity of now (it made the law diverge on a watchdog recovery): start afresh.
                 self.velocity.reset()
+                self.sample_velocity.reset()
                 if stamp - newest.stamp_ns > self.watchdog_ns:
                     # A driver back after the watchdog may be another; one that stalled for
                     # less is the same drive (forgetting its difference restarted the law
@@ -427,7 +249,11 @@ class RobotSampler:
             velocity = self.velocity.update(stamp, state.position)
         else:  # the driver's velocity; the estimate's acceleration only if _take carries it
             self.velocity.add(stamp, state.position)
-            velocity = state.velocity
+            if self._short_difference():
+                velocity = self.sample_velocity.update(stamp, state.position)
+            else:
+                self.sample_velocity.add(stamp, state.position)
+                velocity = state.velocity
         self.newest = JointSample(stamp, state.position, velocity, state.effort)
         if not self.sampling:
             return None
@@ -438,7 +264,7 @@ class RobotSampler:
         driver's period, or the driver's own backward difference (:class:`DifferenceCheck`);
         None where it is the arm's velocity as far as is known (a driver's that is not a
         difference, or the driver's period not known yet)."""
-        if not self.velocity_estimated:
+        if not self.velocity_estimated and not self._short_difference():
             period = self.difference.period_s
             return (
                 None
@@ -447,7 +273,28 @@ class RobotSampler:
             )
         if self.driver_period_ns <= 0:
             return None
-        return self.velocity.stencil(self.driver_period_ns)
+        estimate = self.velocity if self.velocity_estimated else self.sample_velocity
+        return estimate.stencil(self.driver_period_ns)
+
+    def _short_difference(self) -> bool:
+        """The driver's velocity is its drive's backward difference over at most
+        ``short_difference`` of ``T`` (a 1 kHz drive at T = 10 ms): the samples' velocity is
+        then estimated from its positions over ``T`` instead (``velocity_kind``
+        ``sample_estimate``).
+
+        Why. A drive differences its encoder over one of its cycles, so a count of position is
+        a velocity step of a count over that cycle (0.096 rad/s at 1 kHz on 2^16 counts a
+        revolution), and the law's gains of order M/T turn it into torque from sample to
+        sample: the physical Panda's commands in a hold moved by 24 N m a sample on a 1 kHz
+        drive. The parabola over ``T`` spreads a count over the sample (its noise
+        ``sqrt(26) sigma / T`` against the difference's ``sqrt(2) sigma / P``) at the cost of
+        a lag the law's prior models (its stencil). Measured in simulated time
+        (docs/robot.md, "Commands that chatter"): on a 1 kHz drive it halves the chatter at
+        the same tracking; on 250-500 Hz drives (P over a fifth of T) it costs the physical
+        arms tracking, and there the difference is kept.
+        """
+        period = self.difference.period_s
+        return period is not None and period <= self.short_difference_s
 
     def velocity_is_the_arms(self) -> bool:
         """The driver's velocity, shown by its states to be no difference: the arm's own."""
@@ -456,13 +303,16 @@ class RobotSampler:
     @property
     def velocity_kind(self) -> str:
         """What the samples' velocity is: ``estimated`` (from positions), ``difference`` (the
-        driver's backward difference of its positions), ``driver`` (the driver's, taken as
-        the arm's), or ``none`` before a state."""
+        driver's backward difference of its positions), ``sample_estimate`` (estimated from
+        the positions over ``T`` in place of a drive's short difference), ``driver`` (the
+        driver's, taken as the arm's), or ``none`` before a state."""
         if self.newest is None:
             return "none"
         if self.velocity_estimated:
             return "estimated"
-        return "driver" if self.difference.period_s is None else "difference"
+        if self.difference.period_s is None:
+            return "driver"
+        return "sample_estimate" if self._short_difference() else "difference"
 
     def velocity_description(self) -> str:
         """What the samples' velocity is, in words (for a log line)."""
@@ -470,6 +320,13 @@ class RobotSampler:
         if self.velocity_kind == "difference" and stencil is not None:
             span = stencil.offsets[-1] * 1e3
             return f"the backward difference of the driver's positions over {span:.3g} ms"
+        if self.velocity_kind == "sample_estimate":
+            period = self.difference.period_s
+            assert period is not None
+            return (
+                f"estimated from the driver's positions over {self.period_ns * 1e-6:.3g} ms "
+                f"(its drive's difference over {period * 1e3:.3g} ms is short)"
+            )
         return {
             "driver": "the driver's, taken as the arm's",
             "estimated": "estimated from the driver's positions",

@@ -7,15 +7,13 @@ import itertools
 import numpy as np
 import pytest
 
+from apc_feedback.joint_velocity import DIFFERENCE_STATES, DifferenceCheck, VelocityEstimator
 from apc_feedback.linearize import VelocityStencil
 from apc_feedback.robot_sampling import (
-    DIFFERENCE_STATES,
-    DifferenceCheck,
     RobotSampler,
     RobotSamplingConfig,
     RobotSamplingError,
     StateRejectedError,
-    VelocityEstimator,
 )
 from apc_feedback.sample_timing import SampleTiming, TimingWindow
 from apc_feedback.sampling import JointStateSampler
@@ -430,8 +428,9 @@ def test_a_state_after_a_missed_one_is_no_evidence_either_way():
 
 def test_a_1khz_drivers_difference_stays_one_through_missed_states():
     """The physical arm's drive at 1 kHz, every 37th state not published (a loaded machine's
-    missed cycles): the sampler tells the difference once and keeps it."""
-    s = _sampler()
+    missed cycles): the sampler tells the difference once and keeps it (kept as the samples'
+    velocity: ``short_difference`` 0)."""
+    s = _sampler(short_difference=0.0)
     t = np.arange(400) * 0.001
     q = np.stack([np.sin(3 * t), 0.2 * t**2], axis=1)
     kinds = []
@@ -443,6 +442,70 @@ def test_a_1khz_drivers_difference_stays_one_through_missed_states():
     changes = [b for a, b in itertools.pairwise(kinds) if a != b]
     assert changes == ["difference"]
     assert s.velocity_stencil() == VelocityStencil((0.0, 0.001), (1000.0, -1000.0))
+
+
+def _quantised_drive(s, hz, seconds=0.3, count=2 * np.pi / 2**16):
+    """Offer ``s`` a drive at ``hz`` whose encoder counts ``count`` (2^16 a revolution) on a
+    joint moving at 0.05 rad/s and 0.3 rad/s with a 2 Hz swing, its velocity the backward
+    difference of its counts; the samples' velocity error (rad/s) against the arm's."""
+    period_ns = 1_000_000_000 // hz
+    errors = []
+    for i in range(round(seconds * hz)):
+        t = i * period_ns * 1e-9
+        arm = np.array([0.05 * t, 0.3 * t + 0.02 * np.sin(4 * np.pi * t)])
+        q = np.round(arm / count) * count
+        before = np.array([0.05 * (t - period_ns * 1e-9), 0.3 * (t - period_ns * 1e-9)])
+        before[1] += 0.02 * np.sin(4 * np.pi * (t - period_ns * 1e-9))
+        qd = (q - np.round(before / count) * count) / (period_ns * 1e-9)
+        sample = s.offer(_state(i * period_ns, q, qd), i * period_ns)
+        if sample is not None:
+            truth = np.array([0.05, 0.3 + 0.08 * np.pi * np.cos(4 * np.pi * t)])
+            errors.append(sample.velocity - truth)
+    return np.array(errors)
+
+
+def test_a_1khz_drives_short_difference_is_replaced_by_an_estimate_over_a_sample():
+    """A drive's one-cycle difference of a quantised encoder at 1 kHz jumps by a count per
+    cycle (0.096 rad/s); the samples' velocity is then robot mode's parabola over T = 10 ms of
+    the same positions, with that estimate's stencil for the law: under half of the error
+    (``sqrt(26) sigma / T`` against ``sqrt(2) sigma / P``).
+    A 500 Hz drive (its cycle a fifth of T, over ``short_difference``) keeps its difference."""
+    s = _sampler(period=0.01)
+    s.start()
+    errors = _quantised_drive(s, 1000)
+    assert s.velocity_kind == "sample_estimate"
+    over_a_sample = VelocityEstimator(window_ns=T)
+    assert s.velocity_stencil() == over_a_sample.stencil(MS)
+    assert "over 10 ms" in s.velocity_description()
+    kept = _sampler(period=0.01, short_difference=0.0)
+    kept.start()
+    drives = _quantised_drive(kept, 1000)
+    assert kept.velocity_kind == "difference"
+    settled = slice(DIFFERENCE_STATES // 10 + 2, None)  # samples after the kind is known
+    estimate_rms = np.sqrt(np.mean(errors[settled] ** 2))
+    drive_rms = np.sqrt(np.mean(drives[settled] ** 2))
+    assert estimate_rms < drive_rms / 2.0  # 0.016 vs 0.046 rad/s; the noises' ratio: 2.8
+    slower = _sampler(period=0.01)
+    slower.start()
+    _quantised_drive(slower, 500)
+    assert slower.velocity_kind == "difference"
+    assert slower.velocity_stencil() == VelocityStencil((0.0, 0.002), (500.0, -500.0))
+
+
+def test_the_estimate_in_place_of_a_short_difference_is_the_parabola_over_a_sample():
+    """Sample by sample the velocity is what :class:`VelocityEstimator` over T gives for the
+    driver's positions (fed from the first state, so it has its window when the kind is told)."""
+    s = _sampler(period=0.01)
+    s.start()
+    reference = VelocityEstimator(window_ns=T)
+    t = np.arange(200) * 0.001
+    q = np.stack([np.sin(3 * t), 0.2 * t**2], axis=1)
+    for i in range(1, len(t)):
+        expected = reference.update(i * MS, q[i])
+        sample = s.offer(_state(i * MS, q[i], (q[i] - q[i - 1]) / 0.001), i * MS)
+        if sample is not None and s.velocity_kind == "sample_estimate":
+            np.testing.assert_array_equal(sample.velocity, expected)
+    assert s.velocity_kind == "sample_estimate"
 
 
 def test_the_sampler_gives_a_drivers_difference_as_a_stencil_and_forgets_it_after_a_gap():
