@@ -35,6 +35,9 @@ def _sampler(**kw):
 def test_config_names_the_bad_field():
     with pytest.raises(RobotSamplingError, match=r"^max_age"):
         RobotSamplingConfig(max_age=0.0)
+    with pytest.raises(RobotSamplingError, match=r"^short_difference") as err:
+        RobotSamplingConfig(short_difference=1.5)
+    assert err.value.field == "short_difference"
     with pytest.raises(RobotSamplingError, match=r"^watchdog must be >= max_age"):
         RobotSamplingConfig(max_age=0.05, watchdog=0.01)
     with pytest.raises(RobotSamplingError, match=r"^velocity_window"):
