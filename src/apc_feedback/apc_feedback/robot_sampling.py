@@ -289,9 +289,9 @@ class RobotSampler:
         drive. The parabola over ``T`` spreads a count over the sample (its noise
         ``sqrt(26) sigma / T`` against the difference's ``sqrt(2) sigma / P``) at the cost of
         a lag the law's prior models (its stencil). Measured in simulated time
-        (docs/robot.md, "Commands that chatter"): on a 1 kHz drive it halves the chatter at
-        the same tracking; on 250-500 Hz drives (P over a fifth of T) it costs the physical
-        arms tracking, and there the difference is kept.
+        (docs/robot.md, "Commands that chatter"): on a 1 kHz drive it halves the chatter and
+        the physical arms track closer; on 250-500 Hz drives (P a fifth of T or more) it
+        costs the physical arms tracking, and there the difference is kept.
         """
         period = self.difference.period_s
         return period is not None and period <= self.short_difference_s
