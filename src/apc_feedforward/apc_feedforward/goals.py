@@ -170,9 +170,9 @@ class GoalQueue:
         self.queued: list[wire.TrajectoryGoal] = []
         self._last_q: np.ndarray | None = None  # last rendered q_d (where a fallback holds)
         self._stop_plan: Trajectory | None = None  # the plan of the last stop()
-        # The next queued goal as planned from the current motion's end (acting_later):
-        # (that goal, the motion's end sample, its plan), or None.
-        self._next_plan: tuple[wire.TrajectoryGoal, int, Feedforward] | None = None
+        # The next queued goal as planned from the current motion's end (acting_later), which
+        # _advance starts: (that goal, the motion's end sample, its plan, its feedforward).
+        self._next_plan: tuple[wire.TrajectoryGoal, int, Trajectory, Feedforward] | None = None
 
     @classmethod
     def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> GoalQueue:
@@ -220,7 +220,11 @@ class GoalQueue:
         )
 
     def _plan_after(self, ff: Feedforward, goal: wire.TrajectoryGoal) -> Trajectory:
-        """``goal`` planned from the end of ``ff``'s motion and checked (ValueError: refused)."""
+        """``goal`` planned from the end of ``ff``'s motion and checked (ValueError: refused);
+        the plan :meth:`acting_later` made of it from that end, if it did."""
+        cached = self._next_plan
+        if cached is not None and cached[0] is goal and cached[1] == ff.end_k():
+            return cached[2]
         plan = self._plan(ff.trajectory.sample(ff.trajectory.duration)[0], goal)
         self._check_plan(plan)
         return plan
@@ -342,8 +346,9 @@ class GoalQueue:
             cached = self._next_plan
             if cached is None or cached[0] is not goal or cached[1] != end:
                 plan = self._plan_after(ff, goal)  # a goal _advance refuses raises here too
-                self._next_plan = (goal, end, Feedforward(self.model, plan, self.period, end))
-            u_n = self._next_plan[2].sample(later).u_n
+                cached = (goal, end, plan, Feedforward(self.model, plan, self.period, end))
+                self._next_plan = cached
+            u_n = cached[3].sample(later).u_n
         except ValueError:  # FeedforwardError, TrajectoryError
             return setpoint
         return replace(setpoint, u_n=u_n)

@@ -355,7 +355,8 @@ def test_the_nominal_torque_of_when_a_command_acts_is_the_plans_that_much_later(
 def test_the_torque_of_when_a_command_acts_past_a_moves_end_is_the_next_goals(robot):
     """``GoalQueue.acting_later`` past the current motion's end: with a goal queued, the
     torque of that goal's plan as :meth:`GoalQueue.sample` starts it there, not the finished
-    move's rest; none queued, the rest at the move's end."""
+    move's rest; none queued, the rest at the move's end. The goal is planned once: the
+    sample that starts it takes the plan looked ahead at."""
     target, next_q = Q0 + 0.2, Q0 + 0.3
     q = queue(robot, first_goal=target)
     q.sample(0, Q0, keep)
@@ -364,6 +365,9 @@ def test_the_torque_of_when_a_command_acts_past_a_moves_end_is_the_next_goals(ro
     rest = q.acting_later(sp, 2).u_n
     assert_array_equal(rest, q.feedforward.sample(end + 1).u_n)
     q.add(goal([0.5], [next_q]))
+    planned = []
+    plan_goal = q._plan
+    q._plan = lambda start, g: planned.append(g) or plan_goal(start, g)
     ahead = q.acting_later(sp, 2)
     assert ahead.k == end - 1 and ahead.q is sp.q
     assert np.abs(ahead.u_n - rest).max() > 1.0  # the next goal accelerates from the start
@@ -372,3 +376,4 @@ def test_the_torque_of_when_a_command_acts_past_a_moves_end_is_the_next_goals(ro
     for k in range(end, end + 2):
         q.sample(k, Q0, keep)
     assert_array_equal(ahead.u_n, q.sample(end + 1, Q0, keep).setpoint.u_n)
+    assert len(planned) == 1
