@@ -8,8 +8,13 @@ the joint state it was computed from). This module turns those records into the 
 figures; it starts nothing and reads no clock, so that the analysis is tested on synthetic
 records and the script stays a driver of processes.
 
-A command is recognised at the driver by its data (floats cross DDS bit for bit); equal data
-(a command clipped to the limits, a still arm) are taken to arrive in the order they were sent.
+A command is recognised at the driver by its data (floats cross DDS bit for bit). Commands
+arrive in the order they were sent (one writer, one reader), but not every one arrives: the
+driver's reader keeps only the newest (SystemDefaultsQoS, as forward_command_controller's),
+and one sent before the match is never seen. So an arrival is the first command with its data
+sent after the command matched before it; equal data sent in between (a command clipped to the
+limits, a still arm's) never arrived. Matched by data alone, an arrival could be taken for a
+copy that never arrived, sent any time before.
 """
 
 from __future__ import annotations
@@ -69,26 +74,35 @@ def run_samples(
     cycles = np.asarray([c[0] for c in driver["cycles"]], dtype=float) - t0
     held = np.asarray([c[1] for c in driver["cycles"]], dtype=bool)
     window = (cycles >= warmup_s) & (cycles < warmup_s + seconds)
-    # The command each arrival is: by its data (floats cross DDS bit for bit).
-    # Equal data (a command clipped to the limits, a still arm) arrive in the order sent.
-    sent: dict[tuple[float, ...], deque[tuple[int, int]]] = {}
+    # The command each arrival is: the first one sent after the command matched before it
+    # with its data (floats cross DDS bit for bit); those passed over never arrived.
+    records = controller["sent"]
+    sent: dict[tuple[float, ...], deque[int]] = {}
     duplicates = 0
-    for data, state_ns, tick_ns, _publish_ns in controller["sent"]:
+    for index, (data, *_stamps) in enumerate(records):
         queue = sent.setdefault(tuple(data), deque())
         duplicates += bool(queue)
-        queue.append((state_ns, tick_ns))
+        queue.append(index)
     latency, age, trip, late_next = [], [], [], []
     unmatched = 0
+    previous = -1
+    matched: list[int] = []
     period = 1.0 / RATE_HZ
     for data, arrival_abs in arrivals:
-        queue = sent.get(tuple(data))
-        match = queue.popleft() if queue else None
+        queue = sent.get(tuple(data), deque())
+        while queue and queue[0] < previous:
+            queue.popleft()
+        index = queue.popleft() if queue else None
+        if index is not None:
+            previous = index
         arrival = arrival_abs - t0
         if not warmup_s <= arrival < warmup_s + seconds:
             continue
+        match = records[index][1:3] if index is not None else None
         if match is None or match[0] < 0:
             unmatched += 1
             continue
+        matched.append(index)
         state, tick = (match[0] - t0_ns) * 1e-9, (match[1] - t0_ns) * 1e-9
         latency.append(arrival - state)
         age.append(tick - state)
@@ -106,6 +120,8 @@ def run_samples(
         "trip": np.asarray(trip),
         "late_next": np.asarray(late_next, dtype=bool),
         "unmatched": unmatched,
+        # Sent between the window's first and last command that arrived, and not arriving.
+        "lost": matched[-1] - matched[0] + 1 - len(matched) if matched else 0,
         "duplicates": duplicates,
         "counters": {
             k: v for k, v in counters.items() if k in COUNTERS or k.startswith("supervisor.")
@@ -140,6 +156,7 @@ def summary(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "late_after_next_cycle": round(float(late_next.mean()), 5) if late_next.size else None,
         "commands_matched": int(latency.size),
         "commands_unmatched": sum(r["unmatched"] for r in runs),
+        "commands_lost": sum(r["lost"] for r in runs),
         "duplicate_commands": sum(r["duplicates"] for r in runs),
         "controller_counters": counters,
         "max_deviation_deg_per_run": [round(r["max_deviation_deg"], 3) for r in runs],

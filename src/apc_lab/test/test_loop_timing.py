@@ -32,12 +32,27 @@ def test_analysis_matches_commands_to_their_states_in_order_and_counts_late_cycl
     assert out["cycles"] == 9 and out["held_cycles"] == 1
     assert out["late_fraction"] == pytest.approx(1 / 9, abs=1e-5)
     assert out["commands_matched"] == 10 and out["commands_unmatched"] == 0
+    assert out["commands_lost"] == 0
     assert out["duplicate_commands"] == 1
     assert out["latency_us"]["max"] == pytest.approx(1200.0, abs=0.5)
     assert out["latency_us"]["median"] == pytest.approx(300.0, abs=0.5)
     assert out["state_age_at_sample_us"]["median"] == pytest.approx(100.0, abs=0.5)
     assert out["late_after_next_cycle"] == pytest.approx(1 / 9, abs=1e-5)  # 9 has no next
     assert out["max_deviation_deg_per_run"] == [pytest.approx(0.573, abs=1e-3)]
+
+
+def test_a_command_that_never_arrived_is_passed_over_not_matched_to_a_later_copy():
+    """Command 4 never arrives and command 7 carries its data: 7 is matched to itself (0.3 ms),
+    not to 4 (3.3 ms), and 4 is counted lost."""
+    driver, controller = _records()
+    data = controller["sent"][4][0]
+    controller["sent"][7] = (data, *controller["sent"][7][1:])
+    driver["commands"][7] = (data, driver["commands"][7][1])
+    del driver["commands"][4]
+    out = loop_timing.analyse(driver, controller, warmup_s=0.0, seconds=1.0)
+    assert out["latency_us"]["max"] == pytest.approx(1200.0, abs=0.5)  # command 5's
+    assert out["commands_matched"] == 9 and out["commands_unmatched"] == 0
+    assert out["commands_lost"] == 1
 
 
 def test_analysis_without_commands_is_an_error():
