@@ -398,6 +398,8 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> tuple[d
         # A recorder that lost a sample keeps the run going until the sample's writer resends
         # it at its next heartbeat, and says so.
         resent = "keeping the run up to" in stderr
+        # A child whose teardown blocks (experiment.INTERRUPTED_STOP_S) is killed and named.
+        killed = [line for line in stderr.splitlines() if "did not stop on SIGINT" in line]
         report(
             f"{signal.Signals(sig).name} -> experiment exit",
             processes=processes,
@@ -405,6 +407,7 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> tuple[d
             returncode=runner.returncode,
             left=len(left),
             resent=resent,
+            killed=killed,
         )
         assert runner.returncode is not None, f"runner still running after {took:.1f} s"
         assert not left, f"left behind: {left}"
