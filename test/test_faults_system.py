@@ -327,12 +327,14 @@ def test_every_node_stops_on_signal_within_2s(tmp_path, observer, sig):
         obs.spin_until(lambda: obs.k() >= 50, 30, "the run", list(kids.procs.values()))
         for proc in kids.procs.values():
             proc.send_signal(sig)
-        took = wait_all(kids.procs, 10.0)
+        stacks: dict[str, str] = {}  # of a node still there 2.5 s on: the next hang's cause
+        took = wait_all(kids.procs, 10.0, stacks)
         report(f"{signal.Signals(sig).name} -> node exit", **{k: v for k, v in took.items()})
         for name, proc in kids.procs.items():
+            native = f"\nnative stacks at 2.5 s:\n{stacks[name]}" if name in stacks else ""
             assert name in took, f"{name} still running 10 s after {signal.Signals(sig).name}"
-            assert proc.returncode == 0, (name, proc.returncode, kids.stderr(name)[-2000:])
-            assert took[name] <= 2.0, (name, took[name])
+            assert proc.returncode == 0, (name, proc.returncode, kids.stderr(name)[-2000:], native)
+            assert took[name] <= 2.0, (name, took[name], native)
             assert "Traceback" not in kids.stderr(name), kids.stderr(name)[-2000:]
         info = bag_info(bag)
         assert info["complete"] is True

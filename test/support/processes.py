@@ -10,6 +10,7 @@ ended.
 from __future__ import annotations
 
 import contextlib
+import shutil
 import subprocess
 import sys
 import time
@@ -130,16 +131,51 @@ class Children:
         stop_processes([*self.procs.values(), *self.dead], timeout_s=3.0)
 
 
-def wait_all(procs: dict[str, subprocess.Popen], timeout_s: float) -> dict[str, float]:
-    """Poll until every process has exited; return each one's exit time from now (s)."""
+def wait_all(
+    procs: dict[str, subprocess.Popen],
+    timeout_s: float,
+    stacks: dict[str, str] | None = None,
+    stacks_after_s: float = 2.5,
+) -> dict[str, float]:
+    """Poll until every process has exited; return each one's exit time from now (s).
+
+    With ``stacks``, a process still running ``stacks_after_s`` from now gets its native
+    stacks taken once (:func:`native_stacks`) into ``stacks`` by name: a node's teardown that
+    blocked below Python shows only its Python frames in the teardown limit's dump.
+    """
     t0 = time.monotonic()
     took: dict[str, float] = {}
     while len(took) < len(procs) and time.monotonic() - t0 < timeout_s:
         for name, proc in procs.items():
             if name not in took and proc.poll() is not None:
                 took[name] = time.monotonic() - t0
+            elif (
+                stacks is not None
+                and name not in took
+                and name not in stacks
+                and time.monotonic() - t0 > stacks_after_s
+            ):
+                stacks[name] = native_stacks(proc.pid)
         time.sleep(0.002)
     return took
+
+
+def native_stacks(pid: int) -> str:
+    """Every thread's native stack of a running process, by gdb (a test may attach to the
+    processes it started), or why there are none."""
+    gdb = shutil.which("gdb")
+    if gdb is None:
+        return "(no gdb on PATH: no native stacks)"
+    try:
+        out = subprocess.run(
+            [gdb, "-p", str(pid), "-batch", "-ex", "thread apply all bt 30"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except subprocess.TimeoutExpired:
+        return "(gdb took over 60 s)"
+    return out.stdout[-30000:] or out.stderr[-2000:]
 
 
 def process_group(pgid: int) -> list[str]:
