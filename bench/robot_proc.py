@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -153,6 +154,10 @@ def main(argv: list[str] | None = None) -> int:
     cli = ["--ros-args", "--params-file", args.params]
     for item in args.p:
         cli += ["-p", item]
+    # As apc's executables (apc_core.nodeutil.run_nodes): rclpy's SIGINT handler shuts the
+    # context down and then calls Python's; a KeyboardInterrupt raised inside robot_node's
+    # 1 kHz timer callback was logged as "[FATAL] Exception in 'timers' callback" at each stop.
+    signal.signal(signal.SIGINT, lambda *_: None)
     rclpy.init(args=["robot_proc"])
     context = rclpy.get_default_context()
     nodes: list[Any] = []
