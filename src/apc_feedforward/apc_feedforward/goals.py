@@ -222,12 +222,19 @@ class GoalQueue:
     def _plan_after(self, ff: Feedforward, goal: wire.TrajectoryGoal) -> Trajectory:
         """``goal`` planned from the end of ``ff``'s motion and checked (ValueError: refused);
         the plan :meth:`acting_later` made of it from that end, if it did."""
-        cached = self._next_plan
-        if cached is not None and cached[0] is goal and cached[1] == ff.end_k():
+        if (cached := self._planned_next(goal, ff.end_k())) is not None:
             return cached[2]
         plan = self._plan(ff.trajectory.sample(ff.trajectory.duration)[0], goal)
         self._check_plan(plan)
         return plan
+
+    def _planned_next(
+        self, goal: wire.TrajectoryGoal, end: int
+    ) -> tuple[wire.TrajectoryGoal, int, Trajectory, Feedforward] | None:
+        """What :meth:`acting_later` planned of ``goal`` from a motion ending at ``end``, if
+        it did (the queue and the end unchanged since)."""
+        cached = self._next_plan
+        return cached if cached is not None and cached[0] is goal and cached[1] == end else None
 
     def _check_limits(self, positions: np.ndarray) -> None:
         """Refuse waypoints outside the URDF's joint position limits."""
@@ -343,8 +350,8 @@ class GoalQueue:
             if not self.queued or later < ff.end_k():
                 return ff.acting_later(setpoint, samples)
             goal, end = self.queued[0], ff.end_k()
-            cached = self._next_plan
-            if cached is None or cached[0] is not goal or cached[1] != end:
+            cached = self._planned_next(goal, end)
+            if cached is None:
                 plan = self._plan_after(ff, goal)  # a goal _advance refuses raises here too
                 cached = (goal, end, plan, Feedforward(self.model, plan, self.period, end))
                 self._next_plan = cached
