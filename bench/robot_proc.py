@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import time
 from pathlib import Path
@@ -147,17 +146,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
 
-    from apc_core.nodeutil import destroy_nodes, make_executor, spin_once_or_stop
+    from apc_core.nodeutil import (
+        destroy_nodes,
+        leave_sigint_to_rclpy,
+        make_executor,
+        spin_once_or_stop,
+    )
     from apc_feedback.robot_node import RobotNode
     from apc_plant_sim.robot_sim import RobotSimNode
 
     cli = ["--ros-args", "--params-file", args.params]
     for item in args.p:
         cli += ["-p", item]
-    # As apc's executables (apc_core.nodeutil.run_nodes): rclpy's SIGINT handler shuts the
-    # context down and then calls Python's; a KeyboardInterrupt raised inside robot_node's
-    # 1 kHz timer callback was logged as "[FATAL] Exception in 'timers' callback" at each stop.
-    signal.signal(signal.SIGINT, lambda *_: None)
+    leave_sigint_to_rclpy()  # as apc's executables do (apc_core.nodeutil.run_nodes)
     rclpy.init(args=["robot_proc"])
     context = rclpy.get_default_context()
     nodes: list[Any] = []

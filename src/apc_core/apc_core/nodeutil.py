@@ -464,18 +464,7 @@ def run_nodes(
     if executor_kind not in EXECUTORS:
         print(f"{prog}: {EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}", file=sys.stderr)
         return 2
-    # rclpy's SIGINT handler shuts the context down and then calls the handler it replaced. If
-    # that is Python's default, a KeyboardInterrupt is also raised wherever Python happens to be,
-    # e.g. inside rclpy's message conversion in take_message, which turns it into "RuntimeError:
-    # Unable to convert call argument" and a traceback with exit code 1 (e.g. when the runner
-    # stops its children). With a no-op Python handler the shutdown is rclpy's alone: the
-    # spin loop below ends cleanly. Restored on the way out.
-    previous_sigint = None
-    if (
-        threading.current_thread() is threading.main_thread()
-        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    ):
-        previous_sigint = signal.signal(signal.SIGINT, _leave_to_rclpy)
+    previous_sigint = leave_sigint_to_rclpy()  # restored on the way out
     rclpy.init(args=[prog, *argv])
     nodes: list[Node] = []
     executor = None
@@ -529,6 +518,27 @@ def _arm_teardown_limit() -> bool:
     except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is an OSError
         return False
     return True
+
+
+def leave_sigint_to_rclpy() -> Any:
+    """Before ``rclpy.init()``: Python's SIGINT handler becomes a no-op; the handler replaced
+    (to restore), or None where nothing was replaced.
+
+    rclpy's SIGINT handler shuts the context down and then calls the handler it replaced. If
+    that is Python's default, a KeyboardInterrupt is also raised wherever Python happens to be,
+    e.g. inside rclpy's message conversion in take_message, which turns it into "RuntimeError:
+    Unable to convert call argument" and a traceback with exit code 1 (e.g. when the runner
+    stops its children), or inside a timer callback, which the events executor logs as
+    "[FATAL] Exception in 'timers' callback". With a no-op Python handler the shutdown is
+    rclpy's alone: a spin loop on ``rclpy.ok()`` ends cleanly. Only from the main thread and
+    over Python's default handler (a program's own is left alone).
+    """
+    if (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    ):
+        return signal.signal(signal.SIGINT, _leave_to_rclpy)
+    return None
 
 
 def _leave_to_rclpy(signum: int, frame: Any) -> None:
