@@ -358,10 +358,14 @@ FOREGROUND = [
 ]
 
 
-def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> tuple[dict[str, int], int]:
+def _stop_runner_by_signal(
+    tmp_path: Path, sig: int, processes: bool
+) -> tuple[dict[str, int], int, str]:
     """Start the runner, signal it once 40 set points are out; check that it ends within 2 s,
-    leaves no process of its group and finishes a complete recording; the recording's counts
-    and the newest sample whose feedforward torque the observer had seen at the signal.
+    leaves no process of its group and finishes a complete recording; the recording's counts,
+    the newest sample whose feedforward torque the observer had seen at the signal, and the
+    end of the runner's stderr (its children's too: whether it waited for resends, how the
+    plant ended).
 
     The observer does not subscribe to ``joint_states``: the runner's plant starts when three
     nodes listen (recorder, feedforward, feedback), and an extra listener could let it start
@@ -421,7 +425,8 @@ def _stop_runner_by_signal(tmp_path: Path, sig: int, processes: bool) -> tuple[d
         states = read_messages(out / "sig.mcap", topics=["/joint_states"])
         first = min(wire.stamp_to_ns(m.decode().header.stamp) for m in states)
         assert first == 0, f"the recording's first state: {first} ns"
-        return {topic: t["message_count"] for topic, t in info["topics"].items()}, newest
+        counts = {topic: t["message_count"] for topic, t in info["topics"].items()}
+        return counts, newest, stderr[-3000:]
     finally:
         obs.close()
         if runner.poll() is None:
@@ -448,9 +453,9 @@ def test_experiment_runner_stops_on_signal_within_2s(tmp_path, sig, processes):
     then and says so (up to RESEND_WAIT_S more). Stopped at once, the plant took the rest of
     the run with it: 1 run in 26 under two busy loops kept joint states 0-21 of 108, and one in
     CI kept none."""
-    counts, newest = _stop_runner_by_signal(tmp_path, sig, processes)
-    assert counts["/joint_states"] >= 30, counts
-    assert counts["/feedforward/torque"] >= newest + 1, (counts, newest)
+    counts, newest, stderr = _stop_runner_by_signal(tmp_path, sig, processes)
+    assert counts["/joint_states"] >= 30, (counts, stderr)
+    assert counts["/feedforward/torque"] >= newest + 1, (counts, newest, stderr)
 
 
 # ----------------------------------------------------------------------------------------------
