@@ -6,8 +6,8 @@ A ros2_control driver whose hardware exports an effort state interface publishes
 its command leaves (in the callback of the state it was computed from), not when the arm
 applies it: at the driver's next write after it arrives, one driver period, or later where the
 drive adds a cycle of its own or the command's trip crosses a cycle. The effort shows it: the
-first state whose effort is a sent command, where the state before it had another one, reports
-the command applied over the period that ended at its stamp, so
+first state whose effort is a sent command, where the state of the cycle before it had another
+one, reports the command applied over the period that ended at its stamp, so
 
     delay = stamp - driver period - stamp of the state the command was computed from.
 
@@ -19,7 +19,10 @@ adds), the shortest seen twice. One shorter echo is not it: robot_sim's drive th
 cycle applies the first command after activation a cycle early (its buffer starts empty), and
 taking that 10 ms on a 100 Hz driver told the law a wrong delay, its split held, for the two
 samples before the 20 ms showed: a restart more, which on wall time tripped the supervisor in
-the hold. A command
+the hold. A change seen across a state that never arrived (a reader that keeps the newest
+state only, on a loaded machine) is not measured: the command may have been applied in the
+cycle not seen, and taken a period later it had robot mode tell the law 6 ms for 2 ms on a
+500 Hz driver. A command
 matches when every joint's effort equals it to :data:`MATCH_TOLERANCE` (relative, a double's
 round trip through a message is exact): a drive that reports a measured torque (noise, a
 current loop) matches nothing, and the delay stays unknown, as it was before this check. Plain
@@ -50,6 +53,7 @@ class CommandEcho:
         self._pending: deque[tuple[int, np.ndarray]] = deque(maxlen=PENDING)
         self._delays: deque[int] = deque(maxlen=ECHOES)
         self._effort: np.ndarray | None = None
+        self._stamp_ns: int | None = None  # the last state's
         self.delay_ns: int | None = None  # the measured delay, None until MIN_ECHOES
 
     @property
@@ -72,6 +76,7 @@ class CommandEcho:
         self._pending.clear()
         self._delays.clear()
         self._effort = None
+        self._stamp_ns = None
         self.delay_ns = None
 
     def sent(self, state_ns: int, command: np.ndarray) -> None:
@@ -82,16 +87,19 @@ class CommandEcho:
     def observe(self, stamp_ns: int, effort: np.ndarray | None, driver_period_ns: int) -> None:
         """A state's effort (model order; None: the driver sends none)."""
         previous, self._effort = self._effort, effort
+        last_ns, self._stamp_ns = self._stamp_ns, stamp_ns
         if effort is None or previous is None or driver_period_ns <= 0:
             return
         if _equal(effort, previous):
             return  # the same torque as the cycle before: no new command applied
+        # Whether the state before is the previous cycle's (within half a period of jitter).
+        consecutive = last_ns is not None and 2 * (stamp_ns - last_ns) <= 3 * driver_period_ns
         for i, (state_ns, command) in enumerate(self._pending):
             if _equal(effort, command):
                 delay = stamp_ns - driver_period_ns - state_ns
                 for _ in range(i + 1):  # it and the older ones are past
                     self._pending.popleft()
-                if delay >= 0:
+                if consecutive and delay >= 0:
                     self._delays.append(delay)
                     if len(self._delays) >= MIN_ECHOES:
                         self.delay_ns = sorted(self._delays)[1]

@@ -28,6 +28,13 @@ def _drive(echo, period_ms, cycles_late, every=1, commands=30, noise=0.0, seed=0
             queue[cycle + 2 + cycles_late] = command
 
 
+def _applied(echo, stamp_ns, before, command, P):
+    """The driver's states of the cycle before ``stamp_ns`` (effort ``before``) and at it
+    (``command`` applied over the cycle that ended then)."""
+    echo.observe(stamp_ns - P, before, P)
+    echo.observe(stamp_ns, command, P)
+
+
 def test_the_delay_is_one_driver_period_or_one_more_per_cycle_the_drive_adds():
     for period_ms, late, every in ((10.0, 0, 1), (10.0, 1, 1), (2.0, 1, 5), (4.0, 0, 5 // 2)):
         echo = CommandEcho()
@@ -40,15 +47,16 @@ def test_a_delay_is_steady_once_a_full_window_agrees_within_half_a_period():
     P = 4 * MS
     echo = CommandEcho()
     assert not echo.steady(P)
-    echo.observe(0, np.zeros(2), P)  # the effort before the first command
+    before = np.zeros(2)  # the effort before the first command
     for i in range(ECHOES):
         command = np.full(2, float(i + 1))
         echo.sent(i * 10 * P, command)
-        echo.observe(i * 10 * P + 3 * P, command, P)  # 2 P after its state
+        _applied(echo, i * 10 * P + 3 * P, before, command, P)  # 2 P after its state
+        before = command
         assert echo.steady(P) == (i + 1 == ECHOES)  # not on the first few: a window's worth
     command = np.full(2, 99.0)
     echo.sent(100 * P, command)
-    echo.observe(100 * P + 4 * P, command, P)  # one command a cycle late: a jittering drive
+    _applied(echo, 100 * P + 4 * P, before, command, P)  # a cycle late: a jittering drive
     assert echo.delay_ns == 2 * P and not echo.steady(P)
 
 
@@ -62,7 +70,7 @@ def test_a_measured_torque_gives_no_delay_and_a_late_command_adds_none():
         late = i % 3 == 2
         command = np.full(2, float(i + 1))
         echo.sent(i * 10 * P, command)
-        echo.observe(i * 10 * P + (3 if late else 2) * P, command, P)
+        _applied(echo, i * 10 * P + (3 if late else 2) * P, np.full(2, float(i)), command, P)
         echo.observe(i * 10 * P + 5 * P, command, P)  # held: no new application
     assert echo.delay_ns == P
     assert echo.longest_ns == 2 * P  # the late ones are kept: what a delay is not always
@@ -89,7 +97,28 @@ def test_one_shorter_echo_is_not_the_delay():
     for i in range(MIN_ECHOES + 3):
         command = np.full(2, float(i + 1))
         echo.sent(i * 10 * P, command)
-        echo.observe(i * 10 * P + (2 if i == 0 else 3) * P, command, P)
+        _applied(echo, i * 10 * P + (2 if i == 0 else 3) * P, np.full(2, float(i)), command, P)
         if echo.delay_ns is not None:
             assert echo.delay_ns == 2 * P
     assert echo.delay_ns == 2 * P and echo.longest_ns == 2 * P
+
+
+def test_a_change_seen_across_a_state_that_never_arrived_is_not_measured():
+    """Commands applied 2 P after their state; before every other change the state of the
+    cycle before is missing (a reader that keeps the newest state only): the change may have
+    come in that cycle, so only the changes seen from the cycle before are measured."""
+    echo = CommandEcho()
+    P = 2 * MS
+    before = np.zeros(2)
+    for i in range(2 * ECHOES):
+        command = np.full(2, float(i + 1))
+        echo.sent(i * 10 * P, command)
+        applied = i * 10 * P + 3 * P  # over the cycle that ends then
+        if i % 2:  # the states of that cycle's end and the one before it never arrive
+            echo.observe(applied - 2 * P, before, P)
+            echo.observe(applied + P, command, P)  # the change, seen a cycle late
+        else:
+            _applied(echo, applied, before, command, P)
+        before = command
+    assert echo.delay_ns == 2 * P and echo.longest_ns == 2 * P  # none measured as 3 P
+    assert echo.steady(P)
