@@ -300,13 +300,11 @@ class RobotNode(LifecycleNode):
         )
         self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, out_qos)
         self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, out_qos)
-        # Best effort matches a driver's reliable and best-effort publishers alike; only the
-        # newest state is ever used.
         states = self.create_subscription(
             JointState,
             wire.JOINT_STATES,
             guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
-            QoSPresetProfiles.SENSOR_DATA.value,
+            wire.ROBOT_STATE_QOS,
         )
         goals = self.create_subscription(
             JointTrajectory,
