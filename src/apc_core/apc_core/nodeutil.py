@@ -279,7 +279,10 @@ def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable)
     Bad input is rejected inside the callbacks (:func:`reject`); what reaches this is a bug or
     an unforeseen case. It is counted (``callback_errors`` and ``callback_errors.<name>`` on
     ``/diagnostics``), logged (throttled) with its type, and the node carries on with the next
-    message. The wrapper keeps the callback's signature (rclpy inspects it).
+    message. A callback that fails because the node's context was shut down while it ran (a
+    publish on a stopping node: "publisher's context is invalid") is the stop, not a bug: it
+    is neither counted nor logged. The wrapper keeps the callback's signature (rclpy inspects
+    it).
     """
 
     @functools.wraps(callback)
@@ -287,6 +290,8 @@ def guarded(node: Node, diagnostics: Diagnostics, name: str, callback: Callable)
         try:
             return callback(*args)
         except Exception as exc:  # the last line of defence of a running node
+            if not node.context.ok():
+                return None  # stopping (Ctrl-C mid-callback): nothing to report
             n = diagnostics.count(f"callback_errors.{name}")
             diagnostics.count("callback_errors")
             node.get_logger().error(
