@@ -86,8 +86,8 @@ class CommandProbe:
         loop = node.loop
         on_joint_state, publish = loop.on_joint_state, node._publish
 
-        def timed_on_joint_state(state: Any, now_ns: int) -> Any:
-            step = on_joint_state(state, now_ns)
+        def timed_on_joint_state(state: Any, now_ns: int, newest_ns: int | None = None) -> Any:
+            step = on_joint_state(state, now_ns, newest_ns)
             if step.sample is not None:  # sampled on the state's arrival
                 self._state_ns, self._tick_ns = loop.sampler.last.state_ns, now_ns
                 position = step.sample.position

@@ -163,6 +163,29 @@ def test_a_lost_state_leaves_a_gap_the_law_skips_across():
     assert law_calls == [100, 102]
 
 
+def test_a_state_whose_next_samples_state_is_in_hand_is_observed_not_answered():
+    """States queued behind a callback that overran come at once (the node takes them all): a
+    sample whose next sample's state is among them is not answered (its command would act
+    after the next one's); one with only the driver's later states in hand still is."""
+    law_calls = []
+    loop, counts, _ = _loop()  # a 100 Hz driver: each state is a sample's
+    update = loop.law.update
+    loop.law.update = lambda k, *a: law_calls.append(k) or update(k, *a)
+    t = 100 * T
+    loop.activate()
+    assert loop.on_joint_state(_state(t, 0.0), t).command is not None
+    now = t + 2 * T + MS  # the states of samples 101 and 102 arrive together
+    assert loop.on_joint_state(_state(101 * T, 0.0), now, newest_ns=102 * T) == NOTHING
+    assert loop.on_joint_state(_state(102 * T, 0.0), now).command is not None
+    assert counts["samples_overtaken"] == 1 and counts["missed_samples"] == 0
+    assert law_calls == [100, 102]  # a gap the law skips across, as after a lost state
+    # a state 4 ms newer than sample 103's (the next a 250 Hz driver sends) does not take over
+    now = 103 * T + 5 * MS
+    step = loop.on_joint_state(_state(103 * T, 0.0), now, newest_ns=103 * T + 4 * MS)
+    assert step.command is not None
+    assert counts["samples_overtaken"] == 1
+
+
 def test_a_plan_that_cannot_be_computed_sends_no_command_and_is_counted():
     loop, counts, logs = _loop()
     t = 100 * T

@@ -8,7 +8,7 @@ One sample ``k``:
 
 1. the driver's state for the sample's time arrives;
    :class:`~apc_feedback.robot_sampling.RobotSampler` takes sample ``k`` (stamped ``kT``) from
-   it in :meth:`RobotLoop.on_joint_state`;
+   it in :meth:`RobotLoop.on_joint_state` (unless the next sample's state is in hand too);
 2. the feedforward's plan (:class:`apc_feedforward.goals.GoalQueue`: the goals, the hold, the
    nominal torque of Eqs. 2-8 by Newton-Euler) gives set point ``k``, which depends only on
    time and the goals, so it is sampled here, in the loop, as joint_trajectory_controller
@@ -91,17 +91,9 @@ STOP_TOLERANCE = 0.05
 
 
 class Step(NamedTuple):
-    """What the node publishes after one call of :class:`RobotLoop`.
-
-    Attributes
-    ----------
-    command : (n,) ndarray or None
-        The command row in ``command_joints`` order.
-    sample : JointSample or None
-        The sample taken (stamped ``kT``), for observers.
-    setpoint : Setpoint or None
-        The plan's set point of that sample with the ``u_n`` sent, for observers.
-    """
+    """What the node publishes after one call of :class:`RobotLoop`, each None where there is
+    none: the command row (``command_joints`` order); for observers, the sample taken (stamped
+    ``kT``) and the plan's set point of that sample with the ``u_n`` sent."""
 
     command: np.ndarray | None = None
     sample: JointSample | None = None
@@ -194,10 +186,12 @@ class RobotLoop:
         self.delay = DelayTelling(self.echo, self.sampler, self.period_ns)
 
     # -- inputs ---------------------------------------------------------------------------------
-    def on_joint_state(self, state: JointSample, now_ns: int) -> Step:
+    def on_joint_state(self, state: JointSample, now_ns: int, newest_ns: int | None = None) -> Step:
         """A validated joint state (model order) arriving at ``now``: sample ``k`` and its
-        command if it is the state for one. Raises
-        :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be sampled."""
+        command if it is the state for one, unless the state stamped ``newest_ns``, already in
+        hand, overtakes it (:meth:`RobotSampler.overtaken`; counted: ``samples_overtaken``).
+        Raises :class:`~apc_feedback.robot_sampling.StateRejectedError` for one that cannot be
+        sampled."""
         sampler = self.sampler
         sample = sampler.offer(state, now_ns)
         self.echo.observe(state.stamp_ns, state.effort, sampler.driver_period_ns)
@@ -208,6 +202,9 @@ class RobotLoop:
             self.count("missed_samples")
         if sample is None:
             self.count(take.reason)
+            return NOTHING
+        if sampler.overtaken(newest_ns):
+            self.count("samples_overtaken")
             return NOTHING
         assert sampler.phase_ns is not None
         self.timing.sampled(take, sampler.phase_ns, sampler.driver_period_ns)
@@ -438,18 +435,17 @@ class RobotLoop:
                 f"{tolerance[j]:.4g} rad; goal aborted, bringing the arm to rest",
             )
             # The next sample is the start: this one gets no command (the last one stands), so
-            # the law sees a gap and takes no identification step across the change of plan.
-            # A supervised loop holds that start with the fallback when the law's identified
-            # model is outside the supervisor's region (input_gain): a diverging law must not
-            # hold the arm. A law whose model is sound holds it better than the fallback, which
-            # does not know a payload; the triggers keep watching it.
-            supervisor = self.supervisor
+            # the law takes no identification step across the change of plan. The fallback
+            # holds that start where the law's model is outside the supervisor's region
+            # (input_gain): a diverging law must not hold the arm; a sound one holds it better
+            # than the fallback, which does not know a payload.
+            sup = self.supervisor
             if (
-                supervisor is not None
-                and supervisor.in_charge == ADAPTIVE
-                and supervisor.input_gain(self.law) is not None
+                sup is not None
+                and sup.in_charge == ADAPTIVE
+                and sup.input_gain(self.law) is not None
             ):
-                supervisor.hand_over("path_tolerance")
+                sup.hand_over("path_tolerance")
                 self._hand_over(setpoint.k, "path tolerance abort")
             self._restart = self._replan = True
             return Step(sample=sample, setpoint=setpoint)

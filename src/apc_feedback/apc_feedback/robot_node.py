@@ -113,6 +113,7 @@ from apc_feedback.robot_sampling import (
 from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import Supervisor, SupervisorConfig, SupervisorError, fallback_law
 from apc_feedforward.goals import MOVE_PARAMS, GoalQueue, setpoint_message
+from apc_msgs_py import JointSample
 
 AUTOSTART_FLAG = "--autostart"
 
@@ -300,11 +301,15 @@ class RobotNode(LifecycleNode):
         )
         self.sample_pub = self.create_publisher(JointState, wire.SAMPLE, out_qos)
         self.setpoint_pub = self.create_publisher(JointTrajectory, wire.SETPOINT, out_qos)
-        states = self.create_subscription(
+        # Best effort matches a driver's reliable and best-effort publishers alike. States
+        # that queue behind a callback that overran are all taken by the next one
+        # (_on_joint_state): observed, and only one whose next sample's state is not in hand
+        # answered.
+        states = self._state_reader = self.create_subscription(
             JointState,
             wire.JOINT_STATES,
             guarded(self, diag, wire.JOINT_STATES, self._on_joint_state),
-            wire.ROBOT_STATE_QOS,
+            QoSPresetProfiles.SENSOR_DATA.value,
         )
         goals = self.create_subscription(
             JointTrajectory,
@@ -396,16 +401,31 @@ class RobotNode(LifecycleNode):
         loop = self.loop
         if loop is None:
             return
-        try:
-            sample = wire.joint_state_to_arrays(
-                msg, self.joint_names, require=("position",), allow_extra=True
-            )
-        except wire.WireError as exc:
-            reject(self, self.diagnostics, wire.JOINT_STATES, exc)
-            return
+        # The states queued behind this callback (the last one overran): each sampled in
+        # turn, none answered where the next sample's state is already in hand (on wall time
+        # at 1 kHz, answering each in turn sampled states 4-5 ms old for tens of samples).
+        queued = [msg]
+        reader = self._state_reader
+        while (taken := reader.handle.take_message(reader.msg_type, reader.raw)) is not None:
+            queued.append(taken[0])
+        samples = []
+        for each in queued:
+            try:
+                samples.append(
+                    wire.joint_state_to_arrays(
+                        each, self.joint_names, require=("position",), allow_extra=True
+                    )
+                )
+            except wire.WireError as exc:
+                reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+        newest_ns = samples[-1].stamp_ns if samples else None
+        for i, sample in enumerate(samples):
+            self._on_sample(loop, sample, newest_ns if i + 1 < len(samples) else None)
+
+    def _on_sample(self, loop: RobotLoop, sample: JointSample, newest_ns: int | None) -> None:
         started = time.perf_counter()
         try:
-            step = loop.on_joint_state(sample, self._now())
+            step = loop.on_joint_state(sample, self._now(), newest_ns)
         except StateRejectedError as exc:
             self.diagnostics.count(exc.reason)
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)

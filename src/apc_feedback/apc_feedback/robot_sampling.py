@@ -352,6 +352,18 @@ class RobotSampler:
             return 0
         return int((delay_s * 1e9 + 0.25 * self.driver_period_ns) // self.period_ns)
 
+    def overtaken(self, newest_ns: int | None) -> bool:
+        """Whether the last sample taken is overtaken by a state stamped ``newest_ns`` already
+        in hand (None: none newer): one at the next sample's time or later (within half a
+        driver period, where states are carried to it), so that a command from the last one
+        would act after the next one's. Its state is then observed, not answered."""
+        take = self.last
+        return (
+            newest_ns is not None
+            and take is not None
+            and 2 * (newest_ns - take.state_ns) >= 2 * self.period_ns - self.driver_period_ns
+        )
+
     def fresh(self, now_ns: int) -> bool:
         """Whether a joint state arrived within the watchdog window."""
         return self.newest is not None and now_ns - self.newest.stamp_ns <= self.watchdog_ns

@@ -396,3 +396,19 @@ def test_a_delay_short_of_whole_samples_by_jitter_counts_as_them(hz, delays_ms, 
     assert s.driver_period_ns == period_ns
     got = tuple(s.samples_late(d * 1e-3) for d in delays_ms)
     assert got == samples
+
+
+@pytest.mark.parametrize(("hz", "first_ms"), [(250, 8), (1000, 10), (100, 10)])
+def test_a_sample_is_overtaken_by_a_state_in_hand_that_is_the_next_samples(hz, first_ms):
+    """The next sample's state is the driver's nearest to its time (250 Hz: 8 or 12 ms after
+    a sample's state, a tie taking the earlier): a state in hand that far on overtakes the
+    sample, the driver's states before it do not."""
+    s = _sampler()
+    start = 1000 * T
+    _drive(s, hz, start - 50 * MS, 0.05)
+    s.start()
+    _drive(s, hz, start, 0.05)
+    assert s.last is not None and not s.overtaken(None)
+    last, driver = s.last.state_ns, round(1e9 / hz)
+    later = [last + i * driver for i in range(1, 3 * T // driver)]
+    assert all(s.overtaken(t) == (t - last >= first_ms * MS) for t in later)

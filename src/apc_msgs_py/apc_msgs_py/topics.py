@@ -95,18 +95,6 @@ CLOCK_QOS = QoSProfile(
     reliability=ReliabilityPolicy.BEST_EFFORT,
     durability=DurabilityPolicy.VOLATILE,
 )
-#: A robot's ``/joint_states`` as the commanding loop reads them: KEEP_LAST 1, BEST_EFFORT,
-#: VOLATILE. The loop answers the newest state only; a deeper history lets states queue behind a
-#: callback that overran, and each is then answered late in turn: with ``SENSOR_DATA``'s depth
-#: of 5, robot mode at 1 kHz on a loaded machine sampled states 4-5 ms old for tens of
-#: samples, its commands acting five samples after the delay it modelled. Best effort matches a
-#: driver's reliable and best-effort publishers alike.
-ROBOT_STATE_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
 #: Trajectory goals: RELIABLE, KEEP_LAST 10, VOLATILE. A goal must not be lost, but it must NOT be
 #: TRANSIENT_LOCAL: a node that (re)starts late would receive the last goal again and replay an
 #: old motion. A goal is an event, not a state.
