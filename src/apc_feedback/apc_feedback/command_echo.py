@@ -19,10 +19,10 @@ adds), the shortest seen twice. One shorter echo is not it: robot_sim's drive th
 cycle applies the first command after activation a cycle early (its buffer starts empty), and
 taking that 10 ms on a 100 Hz driver told the law a wrong delay, its split held, for the two
 samples before the 20 ms showed: a restart more, which on wall time tripped the supervisor in
-the hold. A change seen across a state that never arrived (a reader that keeps the newest
-state only, on a loaded machine) is not measured: the command may have been applied in the
-cycle not seen, and taken a period later it had robot mode tell the law 6 ms for 2 ms on a
-500 Hz driver. A command
+the hold. A change seen across a state that never arrived (lost on the way, best effort; a
+driver's missed cycle) is not measured: the command may have been applied in the cycle not
+seen, and taken a period later, with a reader that dropped states, it had robot mode tell the
+law 6 ms for 2 ms on a 500 Hz driver. A command
 matches when every joint's effort equals it to :data:`MATCH_TOLERANCE` (relative, a double's
 round trip through a message is exact): a drive that reports a measured torque (noise, a
 current loop) matches nothing, and the delay stays unknown, as it was before this check. Plain

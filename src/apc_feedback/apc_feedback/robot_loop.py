@@ -439,13 +439,13 @@ class RobotLoop:
             # holds that start where the law's model is outside the supervisor's region
             # (input_gain): a diverging law must not hold the arm; a sound one holds it better
             # than the fallback, which does not know a payload.
-            sup = self.supervisor
+            supervisor = self.supervisor
             if (
-                sup is not None
-                and sup.in_charge == ADAPTIVE
-                and sup.input_gain(self.law) is not None
+                supervisor is not None
+                and supervisor.in_charge == ADAPTIVE
+                and supervisor.input_gain(self.law) is not None
             ):
-                sup.hand_over("path_tolerance")
+                supervisor.hand_over("path_tolerance")
                 self._hand_over(setpoint.k, "path tolerance abort")
             self._restart = self._replan = True
             return Step(sample=sample, setpoint=setpoint)

@@ -105,8 +105,8 @@ def test_one_shorter_echo_is_not_the_delay():
 
 def test_a_change_seen_across_a_state_that_never_arrived_is_not_measured():
     """Commands applied 2 P after their state; before every other change the state of the
-    cycle before is missing (a reader that keeps the newest state only): the change may have
-    come in that cycle, so only the changes seen from the cycle before are measured."""
+    cycle before is missing (states lost on the way): the change may have come in that cycle,
+    so only the changes seen from the cycle before are measured."""
     echo = CommandEcho()
     P = 2 * MS
     before = np.zeros(2)

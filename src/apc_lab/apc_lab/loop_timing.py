@@ -36,6 +36,7 @@ LAYOUTS: dict[str, float] = {"robot_node": 0.0, "late_phase": 0.6e-3}
 COUNTERS = (
     "samples_taken",
     "missed_samples",
+    "samples_overtaken",
     "missed_setpoint",
     "late_setpoints",
     "watchdog",
