@@ -136,6 +136,24 @@ def test_saturation_fires_after_samples_in_a_row_clipped():
     assert events == [None] * 10 + ["saturation"]
 
 
+def test_a_few_missing_samples_do_not_clear_the_clipped_run_or_the_growth_a_long_gap_does():
+    """States lost or overtaken at 1 kHz leave gaps of a sample or two between the law's
+    samples; cleared at each, neither the clipped run nor the error's growth ever filled."""
+    off = np.full(2, 0.04)  # beyond suspicion_error
+    sup = Supervisor(SupervisorConfig(saturation_samples=3), 2, T)
+    events = [sup.update(k, off, np.zeros(2), NO_GAIN, None, True) for k in (0, 2, 3)]
+    assert events == [None, None, "saturation"]
+    sup = Supervisor(SupervisorConfig(saturation_samples=3), 2, T)
+    events = [sup.update(k, off, np.zeros(2), NO_GAIN, None, True) for k in (0, 1, 10, 11)]
+    assert events == [None] * 4  # a fault's gap: the run starts again
+    sup = Supervisor(SupervisorConfig(error_bound=0.01), 2, T)
+    events = [
+        sup.update(k, np.array([0.0, 0.005 * k]), np.array([0.0, 0.5]), **QUIET)
+        for k in (0, 1, 3, 4, 6)
+    ]
+    assert events == [None, None, None, "tracking_error", None]
+
+
 def test_hand_back_after_the_error_settles_for_the_dwell_and_the_dwell_doubles_on_a_retrip():
     """Settled: within settle_error for the dwell, and over the last settle_time the error
     travelled (the sum of its changes from sample to sample) at most settle_rate times it

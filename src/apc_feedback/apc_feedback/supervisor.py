@@ -30,6 +30,10 @@ bounded on every arm measured), on the first of these triggers, each named:
 - ``saturation``: the law's command clipped at the effort limit ``saturation_samples``
   samples in a row, with some joint beyond ``suspicion_error``.
 
+Up to ``error_growth_samples`` samples missing between two of the law's (states lost, or
+overtaken by the next sample's) do not clear the error's growth or the clipped run; a longer
+gap does.
+
 A residual, a clipped command or a model passing through an odd region while the arm is on its
 path is no loss of it (a physical arm's move start does all three while the law tracks, and the
 fallback in its place costs more), so those wait for the error.
@@ -304,8 +308,15 @@ class Supervisor:
         error = np.abs(error_q)
         ahead = np.abs(error_q + self._lead * error_qd)  # when a fallback's command can act
         if self._k_prev is not None and k != self._k_prev + 1:
-            self._errors.clear()  # growth is measured over consecutive samples only
-            self._clipped_run = self._settled_run = 0
+            # A few samples missing (states lost, or overtaken by the next sample's: common at
+            # 1 kHz on a loaded machine) are bridged while the law commands: cleared at each
+            # gap, the growth and the clipped run never filled, and a law chattering at its
+            # limits ran the arm 14-27 deg off on wall time. A longer gap (a fault, a start)
+            # clears them, and a settling fallback starts its count afresh at any gap.
+            if not 0 < k - self._k_prev <= self.config.error_growth_samples + 1:
+                self._errors.clear()
+                self._clipped_run = 0
+            self._settled_run = 0
             self._settling.clear()
         self._k_prev = k
         if self.in_charge == FALLBACK:
