@@ -310,8 +310,8 @@ class Supervisor:
         if self._k_prev is not None and k != self._k_prev + 1:
             # A few samples missing (states lost, or overtaken by the next sample's: common at
             # 1 kHz on a loaded machine) are bridged while the law commands: cleared at each
-            # gap, the growth and the clipped run never filled, and a law chattering at its
-            # limits ran the arm 14-27 deg off on wall time. A longer gap (a fault, a start)
+            # gap, the growth and the clipped run never filled there, and a law chattering at
+            # its limits went unseen (docs/performance.md). A longer gap (a fault, a start)
             # clears them, and a settling fallback starts its count afresh at any gap.
             if not 0 < k - self._k_prev <= self.config.error_growth_samples + 1:
                 self._errors.clear()
