@@ -182,7 +182,7 @@ class RobotLoop:
         self._modelled_delay: float | None = None
         self._velocity_kind = ""  # what the samples' velocity was at the last start
         # When the arm applies a command, from the driver's effort; and the delay the law is told.
-        self.echo = CommandEcho()
+        self.echo = CommandEcho(self.period_ns)
         self.delay = DelayTelling(self.echo, self.sampler, self.period_ns)
 
     # -- inputs ---------------------------------------------------------------------------------
