@@ -78,6 +78,7 @@ import yaml
 from apc_lab.wall_clock import (
     ARMS,
     EFFECTS,
+    HOLD_BEFORE_S,
     LAWS,
     LOST_DEG,
     PATH_TOLERANCE,
@@ -99,8 +100,6 @@ RESULTS_JSON = benchlib.BENCH_DIR / "robot_clock.json"
 RESULTS_MD = benchlib.BENCH_DIR / "robot_clock.md"
 #: Where the console scripts are (``robot_sim``, ``robot_node``): beside this interpreter.
 BIN = Path(sys.executable).parent
-#: Wall seconds the arm holds after activation before the goal is sent.
-HOLD_BEFORE_S = 1.0
 #: Wall seconds after the move's planned end before the run ends.
 HOLD_AFTER_S = 0.5
 #: Wall seconds between robot_node's topics appearing in the graph and activation: the graph

@@ -47,6 +47,9 @@ ROBOT_FILE_LAW = "adaptive robot file"
 #: The ``--quick`` subset (``make bench BENCH_ARGS=--quick``): one driver, every law, one run.
 QUICK = {"arms": ("puma3",), "effects": ("physical",), "rates": (500.0,), "runs": 1}
 
+#: Seconds the arm holds after activation before the goal is sent (the offline grid holds as
+#: long: a law that has learnt through a longer hold moves otherwise, docs/robot.md).
+HOLD_BEFORE_S = 1.0
 #: A run is lost when a joint's tracking error goes beyond this (deg) after activation.
 LOST_DEG = 10.0
 #: ``path_tolerance`` for every law (rad; 0 = no check): the loss rule is :data:`LOST_DEG`.
