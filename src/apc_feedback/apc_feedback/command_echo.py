@@ -13,7 +13,8 @@ one, reports the command applied over the period that ended at its stamp, so
 
 :class:`CommandEcho` matches every state's effort against the commands sent and not yet seen
 applied (:data:`PENDING` of them, the newest last), and keeps the last :data:`ECHOES` delays;
-:attr:`CommandEcho.delay_ns` is the second shortest of them once there are :data:`MIN_ECHOES`:
+where a command is held over several driver cycles :attr:`CommandEcho.delay_ns` is the second
+shortest of them once there are :data:`MIN_ECHOES`:
 what the driver and its drive always take (a late command, a loaded machine's jitter, only
 adds), the shortest seen twice. One shorter echo is not it: robot_sim's drive that adds a
 cycle applies the first command after activation a cycle early (its buffer starts empty), and
@@ -79,16 +80,19 @@ class CycleAges:
 
     @property
     def longest_ns(self) -> int | None:
+        """The oldest age kept (ns), None without one."""
         return max(age for _, age in self._ages) if self._ages else None
 
     def __len__(self) -> int:
         return len(self._ages)
 
     def reset(self) -> None:
+        """Forget the ages and the delay."""
         self._ages.clear()
         self._group = self.delay_ns = None
 
     def add(self, age_ns: int, driver_period_ns: int) -> None:
+        """The age of the command applied over one more driver cycle (ns)."""
         self._ages.append((round(age_ns / driver_period_ns), age_ns))
         if len(self._ages) < MIN_ECHOES:
             return
