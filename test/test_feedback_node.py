@@ -209,6 +209,19 @@ def test_the_controllers_robot_carries_the_armature_and_the_inertia_error():
     np.testing.assert_array_equal(robot.model.inertias[2].inertia, plain.model.inertias[2].inertia)
 
 
+@pytest.mark.parametrize("name", ["friction", "damping"])
+def test_the_controllers_robot_carries_its_friction_and_names_a_bad_one(name):
+    values = {p.name: p.default for p in CONTROLLER_ROBOT_PARAMS}
+    robot = controller_robot_from_params({**values, name: [1.0, 2.0, 0.5]})
+    np.testing.assert_array_equal(getattr(robot.model, name), [1.0, 2.0, 0.5])  # Pinocchio's
+    plain = controller_robot_from_params(values)
+    np.testing.assert_array_equal(getattr(plain.model, name), np.zeros(3))  # the URDF has none
+    for bad, words in (([0.1], "needs 3 values"), ([0.1, -1.0, 0.0], ">= 0")):
+        with pytest.raises(ConfigError, match=words) as info:
+            controller_robot_from_params({**values, name: bad})
+        assert str(info.value).startswith(f"parameter '{name}': ")
+
+
 def test_pid_takes_its_parameter_family(node_of):
     fb = node_of("pid", **{"pid.bandwidth": 8.0, "pid.i_clamp": [1.0, 2.0, 3.0]})
     assert fb.law.requested.bandwidth == 8.0 and fb.law.requested.i_clamp == (1.0, 2.0, 3.0)

@@ -48,6 +48,7 @@ from apc_core.robot import (
     load_robot,
     read_urdf,
     with_armature,
+    with_friction,
     with_inertia_error,
 )
 from apc_msgs_py import DIAGNOSTICS, DIAGNOSTICS_QOS, WireError
@@ -96,6 +97,18 @@ CONTROLLER_ROBOT_PARAMS: tuple[Param, ...] = (
         [],
         "the controllers' model: reflected rotor inertia G^2 J_m of each joint's drive "
         "(kg m^2, one per joint; a URDF has no place for it); empty = none",
+    ),
+    Param(
+        "friction",
+        [],
+        "the controllers' model: Coulomb friction of each joint (N m, one per joint), added to "
+        "the nominal torque at the planned velocity; empty = the URDF's <dynamics friction>",
+    ),
+    Param(
+        "damping",
+        [],
+        "the controllers' model: viscous friction of each joint (N m s/rad, one per joint), "
+        "added to the nominal torque; empty = the URDF's <dynamics damping>",
     ),
 )
 
@@ -153,9 +166,16 @@ def matched_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile) ->
 
 def controller_robot_from_params(values: dict[str, Any]) -> Robot:
     """The controllers' model of the arm named by :data:`CONTROLLER_ROBOT_PARAMS` values: the
-    robot with ``inertia_error`` and ``armature``; errors name the parameter."""
+    robot with ``inertia_error``, ``armature``, ``friction`` and ``damping``; errors name the
+    parameter."""
     robot = robot_from_params(values)
-    for name, change in (("inertia_error", with_inertia_error), ("armature", with_armature)):
+    changes: tuple[tuple[str, Callable[[Robot, Any], Robot]], ...] = (
+        ("inertia_error", with_inertia_error),
+        ("armature", with_armature),
+        ("friction", lambda arm, value: with_friction(arm, value, None)),
+        ("damping", lambda arm, value: with_friction(arm, None, value)),
+    )
+    for name, change in changes:
         if values[name]:
             try:
                 robot = change(robot, values[name])

@@ -369,6 +369,33 @@ def with_armature(robot: Robot, armature_kgm2: Sequence[float]) -> Robot:
     return _derived(robot, model)
 
 
+def with_friction(
+    robot: Robot, coulomb_nm: Sequence[float] | None, viscous_nm_s: Sequence[float] | None
+) -> Robot:
+    """Return a new robot whose joints carry a friction model (Pinocchio's ``model.friction``,
+    Coulomb, N m, and ``model.damping``, viscous, N m s/rad: where a URDF's ``<dynamics
+    friction damping>`` puts them), in place of the URDF's; None keeps that one's. RNEA leaves
+    them out; the nominal torque adds them (:func:`apc_feedforward.nominal.nominal_torque`).
+
+    Parameters
+    ----------
+    coulomb_nm, viscous_nm_s : (n,) sequence of float or None
+        One per joint, each finite and >= 0.
+    """
+    model = pin.Model(robot.model)
+    n = robot.n_joints
+    for name, values in (("friction", coulomb_nm), ("damping", viscous_nm_s)):
+        if values is None:
+            continue
+        value = np.asarray(values, dtype=float)
+        if value.shape != (n,):
+            raise RobotModelError(f"{name} needs {n} values (one per joint), got {value.shape}")
+        if not np.all(np.isfinite(value)) or np.any(value < 0.0):
+            raise RobotModelError(f"{name} values must be finite and >= 0, got {value.tolist()}")
+        setattr(model, name, value.copy())  # Pinocchio's field of that name
+    return _derived(robot, model)
+
+
 #: ``robot_description_path`` prefix of a URDF from the ``example-robot-data`` wheel.
 EXAMPLE_ROBOT_DATA = "example-robot-data/"
 

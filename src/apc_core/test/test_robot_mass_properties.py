@@ -26,6 +26,7 @@ from apc_core.robot import (
     Robot,
     RobotModelError,
     with_armature,
+    with_friction,
     with_inertia_error,
     with_payload,
 )
@@ -243,3 +244,27 @@ def test_armature_adds_to_the_mass_matrix_diagonal_and_to_rnea(puma3: Robot) -> 
 def test_armature_needs_one_finite_non_negative_value_per_joint(puma3: Robot, bad) -> None:
     with pytest.raises(RobotModelError, match="armature"):
         with_armature(puma3, bad)
+
+
+def test_friction_is_the_models_and_leaves_rnea_and_the_robot_given_alone(puma3: Robot) -> None:
+    """``with_friction`` sets Pinocchio's ``friction`` (Coulomb) and ``damping`` (viscous),
+    where a URDF's ``<dynamics>`` puts them; None keeps what was there; RNEA ignores both."""
+    both = with_friction(puma3, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
+    assert_array_equal(both.model.friction, [1.0, 2.0, 3.0])
+    assert_array_equal(both.model.damping, [0.1, 0.2, 0.3])
+    coulomb_only = with_friction(both, [4.0, 5.0, 6.0], None)
+    assert_array_equal(coulomb_only.model.damping, [0.1, 0.2, 0.3])
+    assert_array_equal(puma3.model.friction, np.zeros(3))
+    q, v, a = np.array([0.1, -0.4, 0.7]), np.array([0.3, -0.2, 0.5]), np.array([1.0, -2.0, 3.0])
+    assert_array_equal(
+        pin.rnea(both.model, both.model.createData(), q, v, a),
+        pin.rnea(puma3.model, puma3.model.createData(), q, v, a),
+    )
+
+
+@pytest.mark.parametrize("bad", [[0.1, 0.2], [0.1, -0.2, 0.3], [0.1, float("inf"), 0.3]])
+def test_friction_needs_one_finite_non_negative_value_per_joint(puma3: Robot, bad) -> None:
+    with pytest.raises(RobotModelError, match="friction"):
+        with_friction(puma3, bad, None)
+    with pytest.raises(RobotModelError, match="damping"):
+        with_friction(puma3, None, bad)

@@ -48,11 +48,37 @@ class Setpoint:
     u_n: np.ndarray
 
 
+#: Planned speed (rad/s) over which the Coulomb term of the controllers' friction model rises
+#: to its value, ``f tanh(qd / FRICTION_SPEED)``: smooth through a plan's rest, where the sign
+#: of the planned velocity says nothing of the friction a still joint meets.
+FRICTION_SPEED = 0.01
+
+
+def joint_friction(model: pin.Model) -> tuple[np.ndarray, np.ndarray] | None:
+    """The model's friction, ``(viscous N m s/rad, Coulomb N m)`` per joint (Pinocchio's
+    ``model.damping`` and ``model.friction``: a URDF's ``<dynamics>``, or
+    :func:`apc_core.robot.with_friction`); None where both are zero."""
+    viscous, coulomb = np.array(model.damping, dtype=float), np.array(model.friction, dtype=float)
+    return None if not (viscous.any() or coulomb.any()) else (viscous, coulomb)
+
+
 def nominal_torque(
-    model: pin.Model, data: pin.Data, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    qd: np.ndarray,
+    qdd: np.ndarray,
+    friction: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """``u_n = D(q) qdd + h(q, qd) + c(q)`` by recursive Newton-Euler (Eqs. 2-8), shape (n,)."""
+    """``u_n = D(q) qdd + h(q, qd) + c(q)`` by recursive Newton-Euler (Eqs. 2-8), shape (n,),
+    plus the joints' ``friction`` (:func:`joint_friction`) at the planned velocity:
+    ``b qd + f tanh(qd / FRICTION_SPEED)``, which RNEA leaves out. On a physical arm whose
+    commands act a sample or more late, friction is what feedback cannot correct in time
+    (docs/robot.md, "What sets the physical PUMA's miss at 100 Hz")."""
     tau = pin.rnea(model, data, q, qd, qdd)
+    if friction is not None:
+        viscous, coulomb = friction
+        tau = tau + viscous * qd + coulomb * np.tanh(np.asarray(qd) / FRICTION_SPEED)
     if not np.logical_and.reduce(np.isfinite(tau)):  # np.all's wrapper costs more (per sample)
         raise FeedforwardError("nominal torque is not finite (check the set point)")
     return np.array(tau, dtype=float)
@@ -87,6 +113,7 @@ class Feedforward:
             )
         self.model = model
         self._data = model.createData()
+        self._friction = joint_friction(model)
         self.period = float(period)
         self.trajectory = trajectory
         self.start_k = int(start_k)
@@ -126,7 +153,7 @@ class Feedforward:
             self._block = block
         i = k - block[0]
         q, qd, qdd = block[1][i], block[2][i], block[3][i]
-        u_n = nominal_torque(self.model, self._data, q, qd, qdd)
+        u_n = nominal_torque(self.model, self._data, q, qd, qdd, self._friction)
         return Setpoint(k=k, t=t, q=q, qd=qd, qdd=qdd, u_n=u_n)
 
     def acting_later(self, setpoint: Setpoint, samples: int) -> Setpoint:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from apc_core.robot import Payload, load_robot, with_armature, with_inertia_error
+from apc_core.robot import Payload, load_robot, with_armature, with_friction, with_inertia_error
 from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
 from apc_feedback.presets import recommended_settings
@@ -171,6 +171,7 @@ def run_robot_loop(
     arm: Scenario | None = None,
     velocity: bool | None = None,
     armature: Sequence[float] | None = None,
+    friction: tuple[Sequence[float], Sequence[float]] | None = None,
     effort: bool = True,
     missed: float = 0.0,
     missed_seed: int = 0,
@@ -222,6 +223,9 @@ def run_robot_loop(
     armature : sequence of float, optional
         The controllers' model's rotor inertia per joint (kg m^2), as the controller nodes'
         ``armature`` parameter; default none.
+    friction : (coulomb, viscous) per joint, optional
+        The controllers' model's friction (N m, N m s/rad), as the controller nodes'
+        ``friction`` and ``damping`` parameters; default none.
     effort : bool
         Whether the states carry the torque the drive applied over the period that ended at
         their stamp (``robot_sim``'s ``publish_effort``, on by default as there), from which
@@ -245,6 +249,8 @@ def run_robot_loop(
     controller = with_inertia_error(robot, arm.inertia_error)
     if armature is not None:
         controller = with_armature(controller, armature)
+    if friction is not None:
+        controller = with_friction(controller, *friction)
     q0 = np.deg2rad(arm.q_start_deg)
     # The driver's command order: the URDF's reversed, so that the loop's mapping is exercised.
     command_joints = tuple(reversed(robot.joint_names))
