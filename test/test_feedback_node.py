@@ -17,8 +17,8 @@ from rclpy.parameter import Parameter
 from support.nodes import counter, overrides
 
 import apc_msgs_py as wire
-from apc_core.nodeutil import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
 from apc_core.params import ConfigError
+from apc_core.robot_params import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
 from apc_feedback.node import FeedbackNode
 from apc_lab.experiment import RunSpec
 from apc_lab.scenario import paper_scenario
@@ -215,7 +215,7 @@ def test_the_controllers_robot_carries_its_friction_and_names_a_bad_one(name):
     robot = controller_robot_from_params({**values, name: [1.0, 2.0, 0.5]})
     np.testing.assert_array_equal(getattr(robot.model, name), [1.0, 2.0, 0.5])  # Pinocchio's
     plain = controller_robot_from_params(values)
-    np.testing.assert_array_equal(getattr(plain.model, name), np.zeros(3))  # the URDF has none
+    np.testing.assert_array_equal(getattr(plain.model, name), np.zeros(3))  # empty: none
     for bad, words in (([0.1], "needs 3 values"), ([0.1, -1.0, 0.0], ">= 0")):
         with pytest.raises(ConfigError, match=words) as info:
             controller_robot_from_params({**values, name: bad})

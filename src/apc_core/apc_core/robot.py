@@ -267,6 +267,10 @@ def load_robot(
                 ": apc needs a serial chain (lock the other branch with lock_joints)"
             )
     model.gravity.linear = np.array([0.0, 0.0, -gravity])
+    # A URDF's <dynamics friction damping> is what a simulator applies (example-robot-data's
+    # Panda: damping 0.003 for Gazebo); the controllers' friction is told (with_friction).
+    model.friction = np.zeros(model.nv)
+    model.damping = np.zeros(model.nv)
     names = tuple(model.names[j] for j in range(1, model.njoints))
     effort = np.array(model.effortLimit, dtype=float)
     if not np.all(effort > 0.0):
@@ -373,9 +377,9 @@ def with_friction(
     robot: Robot, coulomb_nm: Sequence[float] | None, viscous_nm_s: Sequence[float] | None
 ) -> Robot:
     """Return a new robot whose joints carry a friction model (Pinocchio's ``model.friction``,
-    Coulomb, N m, and ``model.damping``, viscous, N m s/rad: where a URDF's ``<dynamics
-    friction damping>`` puts them), in place of the URDF's; None keeps that one's. RNEA leaves
-    them out; the nominal torque adds them (:func:`apc_feedforward.nominal.nominal_torque`).
+    Coulomb, N m, and ``model.damping``, viscous, N m s/rad; :func:`load_robot` leaves both at
+    zero whatever the URDF's ``<dynamics>`` says); None keeps the robot's. RNEA leaves them
+    out; the nominal torque adds them (:func:`apc_feedforward.nominal.nominal_torque`).
 
     Parameters
     ----------

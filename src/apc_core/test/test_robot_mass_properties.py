@@ -247,8 +247,8 @@ def test_armature_needs_one_finite_non_negative_value_per_joint(puma3: Robot, ba
 
 
 def test_friction_is_the_models_and_leaves_rnea_and_the_robot_given_alone(puma3: Robot) -> None:
-    """``with_friction`` sets Pinocchio's ``friction`` (Coulomb) and ``damping`` (viscous),
-    where a URDF's ``<dynamics>`` puts them; None keeps what was there; RNEA ignores both."""
+    """``with_friction`` sets Pinocchio's ``friction`` (Coulomb) and ``damping`` (viscous);
+    None keeps what was there; RNEA ignores both."""
     both = with_friction(puma3, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
     assert_array_equal(both.model.friction, [1.0, 2.0, 3.0])
     assert_array_equal(both.model.damping, [0.1, 0.2, 0.3])
@@ -268,3 +268,17 @@ def test_friction_needs_one_finite_non_negative_value_per_joint(puma3: Robot, ba
         with_friction(puma3, bad, None)
     with pytest.raises(RobotModelError, match="damping"):
         with_friction(puma3, None, bad)
+
+
+def test_a_urdfs_dynamics_is_not_the_controllers_friction() -> None:
+    """example-robot-data's Panda declares ``<dynamics damping="0.003">`` for a simulator; the
+    loaded model carries no friction until one is told (:func:`with_friction`)."""
+    from apc_core.config_files import resolve_config_path
+    from apc_core.robot import load_robot
+
+    panda = load_robot(
+        resolve_config_path("example-robot-data/panda_description/urdf/panda.urdf"),
+        lock_joints=("panda_finger_joint1", "panda_finger_joint2"),
+    )
+    assert_array_equal(panda.model.damping, np.zeros(7))
+    assert_array_equal(panda.model.friction, np.zeros(7))

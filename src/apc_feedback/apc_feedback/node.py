@@ -31,17 +31,16 @@ from trajectory_msgs.msg import JointTrajectory
 
 import apc_msgs_py as wire
 from apc_core.nodeutil import (
-    CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
-    controller_robot_from_params,
     guarded,
     matched_publisher,
     reject,
     run_node,
 )
 from apc_core.params import ConfigError, Param, declare
+from apc_core.robot_params import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
 from apc_feedback.controller import FeedbackError
 from apc_feedback.laws import LawParameters
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows

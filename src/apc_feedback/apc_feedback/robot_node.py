@@ -85,10 +85,8 @@ from trajectory_msgs.msg import JointTrajectory
 import apc_msgs_py as wire
 from apc_core.node_logs import level_logger
 from apc_core.nodeutil import (
-    CONTROLLER_ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
-    controller_robot_from_params,
     guarded,
     print_help,
     reject,
@@ -96,6 +94,7 @@ from apc_core.nodeutil import (
     split_ros_args,
 )
 from apc_core.params import ConfigError, Param, declare, params_from, subset
+from apc_core.robot_params import CONTROLLER_ROBOT_PARAMS, controller_robot_from_params
 from apc_feedback.command_echo import CommandEcho
 from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import AdaptiveFeedback, FeedbackError

@@ -56,8 +56,8 @@ FRICTION_SPEED = 0.01
 
 def joint_friction(model: pin.Model) -> tuple[np.ndarray, np.ndarray] | None:
     """The model's friction, ``(viscous N m s/rad, Coulomb N m)`` per joint (Pinocchio's
-    ``model.damping`` and ``model.friction``: a URDF's ``<dynamics>``, or
-    :func:`apc_core.robot.with_friction`); None where both are zero."""
+    ``model.damping`` and ``model.friction``, as :func:`apc_core.robot.with_friction` sets
+    them); None where both are zero."""
     viscous, coulomb = np.array(model.damping, dtype=float), np.array(model.friction, dtype=float)
     return None if not (viscous.any() or coulomb.any()) else (viscous, coulomb)
 

@@ -28,9 +28,9 @@ import yaml
 
 from apc_core.config_files import resolve_config_path
 from apc_core.defaults import DERIVATION, ArmDefaults, load
-from apc_core.nodeutil import ROBOT_PARAMS
 from apc_core.params import Param
 from apc_core.robot import RobotModelError
+from apc_core.robot_params import ROBOT_PARAMS
 from apc_feedback.node import PARAMS as FEEDBACK_PARAMS
 from apc_feedback.robot_node import PARAMS as ROBOT_NODE_PARAMS
 from apc_feedforward.node import PARAMS as FEEDFORWARD_PARAMS

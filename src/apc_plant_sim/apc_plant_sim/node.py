@@ -46,19 +46,16 @@ from sensor_msgs.msg import JointState
 
 import apc_msgs_py as wire
 from apc_core.nodeutil import (
-    ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
     Stopwatch,
-    fill_derived,
     guarded,
     publish_robot_description,
     reject,
-    robot_from_params,
     run_node,
-    urdf_xml,
 )
 from apc_core.params import ConfigError, Param, declare
+from apc_core.robot_params import ROBOT_PARAMS, fill_derived, robot_from_params, urdf_xml
 from apc_plant_sim.intake import WATCHDOG_PARAMS, Action, Filed, Source, TorqueIntake
 from apc_plant_sim.pacing import PACING_PARAMS, StatePacer
 from apc_plant_sim.plant import PlantError
