@@ -1,7 +1,6 @@
-"""What every apc node shares: the robot from parameters, diagnostics, and ``main``.
+"""What every apc node shares: diagnostics, the border, and ``main`` (the arm it loads from
+its parameters: :mod:`apc_core.robot_params`).
 
-- :data:`ROBOT_PARAMS` and :func:`robot_from_params` — the arm every node loads, from
-  ``robot_description`` (URDF XML, the ROS convention) or ``robot_description_path``.
 - :class:`Diagnostics` — counters and timing, published on ``/diagnostics`` at 1 Hz wall time.
 - :func:`run_node` — ``main`` for a node executable: ``--help``, one-line start-up errors with
   exit code 2, clean shutdown on SIGINT/SIGTERM (Jazzy: try/finally and ``try_shutdown``).

@@ -60,15 +60,13 @@ from std_msgs.msg import Float64MultiArray
 
 import apc_msgs_py as wire
 from apc_core.nodeutil import (
-    ROBOT_PARAMS,
     Diagnostics,
     DiagnosticsPublisher,
-    fill_derived,
     guarded,
-    robot_from_params,
     run_node,
 )
 from apc_core.params import ConfigError, Param, declare
+from apc_core.robot_params import ROBOT_PARAMS, fill_derived, robot_from_params
 from apc_plant_sim.effects import ArmEffects
 from apc_plant_sim.engines import (
     EFFECT_PRESETS,
