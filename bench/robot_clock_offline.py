@@ -62,9 +62,10 @@ RATES_HZ = (100, 250, 500, 1000)
 #: The runs of a cell: the payload times these (run i also draws late commands with seed i).
 PAYLOAD_FACTORS = (1.0, 0.99, 0.995, 1.005, 1.01)
 #: Case (c)'s move (s), which starts :data:`~apc_lab.wall_clock.HOLD_BEFORE_S` after
-#: activation, as the wall-time bench sends its goal; the run ends :data:`HOLD_AFTER_S` after it.
+#: activation, as the wall-time bench sends its goal; the run ends :data:`FINAL_HOLD_S` after it
+#: (its last sample is the table's final error).
 MOVE_S = 1.0
-HOLD_AFTER_S = 1.3
+FINAL_HOLD_S = 1.3
 #: The hold after the move from which the commands' chatter is measured (s after the move's
 #: end): the worst joint's mean |u(k) - u(k-1)| (N m), docs/robot.md, "Commands that chatter".
 CHATTER_AFTER_MOVE_S = 0.2
@@ -105,7 +106,7 @@ def one_run(
     else:
         arm_effects = ARM_EFFECTS[arm]() if effects == "physical" else None
     run = run_robot_loop(
-        HOLD_BEFORE_S + MOVE_S + HOLD_AFTER_S,
+        HOLD_BEFORE_S + MOVE_S + FINAL_HOLD_S,
         goal_deg=scenario.q_goal_deg,
         hold_s=HOLD_BEFORE_S,
         driver_ms=driver_ms,

@@ -362,15 +362,21 @@ def with_armature(robot: Robot, armature_kgm2: Sequence[float]) -> Robot:
     armature_kgm2 : (n,) sequence of float
         One per joint, each finite and >= 0.
     """
-    value = np.asarray(armature_kgm2, dtype=float)
+    model = pin.Model(robot.model)
+    model.armature = _joint_values(robot, "armature", armature_kgm2)
+    return _derived(robot, model)
+
+
+def _joint_values(robot: Robot, name: str, values: Sequence[float]) -> np.ndarray:
+    """``values`` as a new (n,) array, one finite value >= 0 per joint, else RobotModelError
+    naming ``name``."""
+    value = np.array(values, dtype=float)
     n = robot.n_joints
     if value.shape != (n,):
-        raise RobotModelError(f"armature needs {n} values (one per joint), got {value.shape}")
+        raise RobotModelError(f"{name} needs {n} values (one per joint), got {value.shape}")
     if not np.all(np.isfinite(value)) or np.any(value < 0.0):
-        raise RobotModelError(f"armature values must be finite and >= 0, got {value.tolist()}")
-    model = pin.Model(robot.model)
-    model.armature = value.copy()
-    return _derived(robot, model)
+        raise RobotModelError(f"{name} values must be finite and >= 0, got {value.tolist()}")
+    return value
 
 
 def with_friction(
@@ -387,16 +393,9 @@ def with_friction(
         One per joint, each finite and >= 0.
     """
     model = pin.Model(robot.model)
-    n = robot.n_joints
     for name, values in (("friction", coulomb_nm), ("damping", viscous_nm_s)):
-        if values is None:
-            continue
-        value = np.asarray(values, dtype=float)
-        if value.shape != (n,):
-            raise RobotModelError(f"{name} needs {n} values (one per joint), got {value.shape}")
-        if not np.all(np.isfinite(value)) or np.any(value < 0.0):
-            raise RobotModelError(f"{name} values must be finite and >= 0, got {value.tolist()}")
-        setattr(model, name, value.copy())  # Pinocchio's field of that name
+        if values is not None:  # Pinocchio's field of that name
+            setattr(model, name, _joint_values(robot, name, values))
     return _derived(robot, model)
 
 
