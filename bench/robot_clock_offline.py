@@ -24,15 +24,18 @@ far the command moves from one sample to the next in the hold after the move, th
 worst joint's mean |u(k) - u(k-1)| (N m). About four minutes on one core.
 
     .venv/bin/python bench/robot_clock_offline.py [--arms ...] [--no-relinearize]
-        [--ideal-velocity] [--no-armature] [--no-feedforward-ahead] [--alpha-model A]
+        [--ideal-velocity] [--no-armature] [--no-friction] [--no-feedforward-ahead]
+        [--alpha-model A]
         [--set NAME=VALUE ...] [--json FILE]
 
 ``--no-relinearize``: the recommended preset with the paper's prior (Eq. 33 at the first set
 point only, ``adaptive.relinearize: false``) instead of one that follows the set point.
 ``--ideal-velocity``: the ideal arm's driver publishes the arm's exact velocity as well (what
 ``robot_sim`` does by default), instead of positions only. The controllers of a physical arm
-are told its rotor inertia (the controller nodes' ``armature``), as the wall-time benchmark's
-are (:func:`apc_lab.robot_compare.controller_armature`); ``--no-armature``: not told.
+are told its rotor inertia and its friction (the controller nodes' ``armature``, ``friction``
+and ``damping``), as the wall-time benchmark's are
+(:func:`apc_lab.robot_compare.controller_arm_parameters`); ``--no-armature``,
+``--no-friction``: not told.
 ``--alpha-model A``: the recommended preset with ``alpha_model`` A (``--set alpha_model=A``).
 ``--set NAME=VALUE`` (repeatable): the recommended preset with its setting NAME VALUE (a number,
 an integer or a boolean as the preset's own value is; a later one wins), to measure a candidate
@@ -51,7 +54,12 @@ import numpy as np
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop
 from apc_feedback.supervisor import SupervisorConfig
-from apc_lab.robot_compare import ARM_EFFECTS, arm_scenario, controller_armature
+from apc_lab.robot_compare import (
+    ARM_EFFECTS,
+    arm_scenario,
+    controller_armature,
+    controller_friction,
+)
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.wall_clock import HOLD_BEFORE_S, LOST_DEG
 from apc_plant_sim.effects import ArmEffects
@@ -89,15 +97,16 @@ def one_run(
     setup: Callable[[RobotLoop], object] | None = None,
     armature: bool = True,
     feedforward_ahead: bool = True,
+    friction: bool = True,
 ) -> dict:
     """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
     joint (deg), hand-overs, the commands' chatter in the hold (N m).
 
     ``effects``: one of :data:`EFFECTS`, or the arm's effects themselves (in MuJoCo, as
     ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before
-    activation); ``armature``: the controllers of a ``physical`` arm are told its rotor inertia
-    (:func:`controller_armature`; never for effects given as themselves: what they cost
-    unknown).
+    activation); ``armature``, ``friction``: the controllers of a ``physical`` arm are told its
+    rotor inertia (:func:`controller_armature`), its friction (:func:`controller_friction`;
+    neither for effects given as themselves: what they cost unknown).
     """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
@@ -123,6 +132,9 @@ def one_run(
         feedforward_ahead=feedforward_ahead,
         armature=controller_armature(arm, effects)
         if armature and isinstance(effects, str)
+        else None,
+        friction=controller_friction(arm, effects)
+        if friction and isinstance(effects, str)
         else None,
     )
     errors = run.tracking_error_deg()
@@ -173,11 +185,12 @@ def measure(
     ideal_velocity: bool = False,
     armature: bool = True,
     feedforward_ahead: bool = True,
+    friction: bool = True,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
     preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
-    ``armature``: the controllers know a physical arm's rotor inertia; ``feedforward_ahead``:
-    robot mode's."""
+    ``armature``, ``friction``: the controllers know a physical arm's rotor inertia, its
+    friction; ``feedforward_ahead``: robot mode's."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -196,6 +209,7 @@ def measure(
                                 ideal_velocity,
                                 armature=armature,
                                 feedforward_ahead=feedforward_ahead,
+                                friction=friction,
                             )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
@@ -315,6 +329,11 @@ def parser() -> argparse.ArgumentParser:
         help="the controllers' model of a physical arm lacks its rotor inertia",
     )
     cli.add_argument(
+        "--no-friction",
+        action="store_true",
+        help="the controllers' model of a physical arm lacks its friction",
+    )
+    cli.add_argument(
         "--no-feedforward-ahead",
         action="store_true",
         help="robot mode's feedforward_ahead off: the nominal torque of the sample's own time",
@@ -353,6 +372,7 @@ def main() -> None:
         args.ideal_velocity,
         not args.no_armature,
         not args.no_feedforward_ahead,
+        not args.no_friction,
     )
     print()
     print(markdown(cells), end="")
@@ -362,6 +382,7 @@ def main() -> None:
             "relinearize": (settings or recommended_settings())["relinearize"],
             "ideal_velocity": args.ideal_velocity,
             "armature": not args.no_armature,
+            "friction": not args.no_friction,
             "feedforward_ahead": not args.no_feedforward_ahead,
             "alpha_model": changed.get("alpha_model"),
             "settings_overrides": changed,

@@ -3,6 +3,8 @@ and one run through the robot interface with every effect on (DDS, sim time)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import yaml
@@ -14,7 +16,7 @@ from apc_feedforward.four_three_four import FourThreeFour
 from apc_feedforward.trajectory import Waypoints
 from apc_lab import robot_compare as rc
 from apc_lab import robot_report
-from apc_plant_sim.effects import puma560_effects
+from apc_plant_sim.effects import panda_effects, puma560_effects
 from apc_recording import bag
 from apc_recording.bag import BagWriter
 from apc_recording.runs import load_robot_run
@@ -72,6 +74,31 @@ def test_the_controllers_of_a_physical_puma_are_told_its_rotor_inertia():
     for arm, effects in (("puma3", "ideal"), ("puma3", "armature"), ("panda", "physical")):
         params = rc.node_parameters(rc.RobotCase(arm, "c", effects, "PID"))["robot_node"]
         assert "armature" not in params, (arm, effects)
+
+
+def test_the_controllers_of_a_physical_arm_are_told_its_friction_as_robot_sim_applies_it():
+    """Every law's, Coulomb as the mean of the two directions (MuJoCo's ``frictionloss`` that
+    ``robot_sim`` makes of the preset) and the viscous friction; the same values on the wall-time
+    bench's command line; none for the ideal arm or one effect alone."""
+    from apc_lab.wall_clock import controller_arguments
+
+    for arm, data in (("puma3", puma560_effects()), ("panda", panda_effects())):
+        n = len(data.counts_per_rev)
+        coulomb = 0.5 * (np.array(data.coulomb_pos_nm) + np.array(data.coulomb_neg_nm))
+        for law in ("computed torque", "PID", "adaptive recommended"):
+            told = rc.node_parameters(rc.RobotCase(arm, "c", "physical", law))["robot_node"]
+            np.testing.assert_allclose(told["friction"], coulomb)
+            np.testing.assert_allclose(told["damping"], data.per_joint("viscous_nm_s", n))
+            args = controller_arguments(arm, law, "physical")
+            assert f"robot_node:friction:={json.dumps(told['friction'])}" in args
+            assert f"robot_node:damping:={json.dumps(told['damping'])}" in args
+        sim = rc.effect_parameters(arm, "friction")
+        np.testing.assert_allclose(sim["frictionloss"], coulomb)
+    assert puma560_effects().coulomb_pos_nm != puma560_effects().coulomb_neg_nm
+    for arm, effects in (("puma3", "ideal"), ("puma3", "friction"), ("panda", "ideal")):
+        params = rc.node_parameters(rc.RobotCase(arm, "c", effects, "PID"))["robot_node"]
+        assert "friction" not in params and "damping" not in params, (arm, effects)
+        assert not any("friction" in a for a in controller_arguments(arm, "PID", effects))
 
 
 def test_one_effect_alone_is_the_presets_value_of_it():

@@ -171,13 +171,43 @@ def controller_armature(arm: str, effects: str) -> list[float] | None:
     ``armature``): the physical arm's, as a user configures a geared arm from its drives' data
     (motor inertia times gear ratio squared; a URDF cannot carry it); None for the ideal arm, an
     arm without it (the Panda's preset) and one effect alone (what each unknown effect costs).
-    What the controllers still do not know: the payload, friction, quantised encoders, the
-    drive's differenced velocity and its delay."""
+    What the controllers still do not know: the payload, quantised encoders, the drive's
+    differenced velocity and its delay."""
     if effects != "physical":
         return None
     data = ARM_EFFECTS[arm]()
     values = data.per_joint("armature_kgm2", len(data.counts_per_rev))
     return values.tolist() if values.any() else None
+
+
+def controller_friction(arm: str, effects: str) -> tuple[list[float], list[float]] | None:
+    """The friction the controllers are told, (Coulomb N m, viscous N m s/rad) per joint, the
+    controller nodes' ``friction`` and ``damping``: the physical arm's, as a user configures it
+    from a friction identification (a URDF's ``<dynamics>`` is not taken), Coulomb as one level
+    for both directions, the mean of the two (what ``robot_sim``'s MuJoCo applies); None for the
+    ideal arm and one effect alone (what each unknown effect costs)."""
+    if effects != "physical":
+        return None
+    data = ARM_EFFECTS[arm]()
+    n = len(data.counts_per_rev)
+    coulomb, viscous = data.mean_coulomb(n), data.per_joint("viscous_nm_s", n)
+    if not (coulomb.any() or viscous.any()):
+        return None
+    return coulomb.tolist(), viscous.tolist()
+
+
+def controller_arm_parameters(arm: str, effects: str) -> dict[str, list[float]]:
+    """The controller nodes' parameters that describe the arm as its user tells it (``armature``,
+    ``friction``, ``damping``; :func:`controller_armature`, :func:`controller_friction`): every
+    law's, so that the comparison stays fair; empty for the ideal arm and one effect alone."""
+    values: dict[str, list[float]] = {}
+    armature = controller_armature(arm, effects)
+    if armature is not None:
+        values["armature"] = armature
+    friction = controller_friction(arm, effects)
+    if friction is not None:
+        values["friction"], values["damping"] = friction
+    return values
 
 
 @dataclass(frozen=True)
@@ -237,7 +267,7 @@ def effect_parameters(arm: str, effects: str) -> dict[str, Any]:
         return {"effects": PHYSICAL_PRESETS[arm] if effects == "physical" else "ideal"}
     one = single_effect(effects, ARM_EFFECTS[arm]())
     n = len(ARM_EFFECTS[arm]().counts_per_rev)
-    coulomb = 0.5 * (one.per_joint("coulomb_pos_nm", n) + one.per_joint("coulomb_neg_nm", n))
+    coulomb = one.mean_coulomb(n)
     values = {
         "effects": "ideal",
         "damping": one.per_joint("viscous_nm_s", n).tolist(),
@@ -268,9 +298,7 @@ def node_parameters(case: RobotCase) -> dict[str, dict[str, Any]]:
         "autostart": True,
         **law_parameters(controller, settings),
     }
-    armature = controller_armature(case.arm, case.effects)
-    if armature is not None:
-        robot_node["armature"] = armature
+    robot_node.update(controller_arm_parameters(case.arm, case.effects))
     sim = case.timing == "sim"
     robot_sim = {
         **shared,

@@ -275,8 +275,8 @@ def robot_file_overrides(arm: str) -> dict[str, Any]:
 def controller_arguments(arm: str, law: str, effects: str) -> list[str]:
     """``-p`` overrides of the robot file for one law (lifecycle driven by the benchmark) on the
     arm with ``effects``: a physical arm's rotor inertia, told to every law as its user tells
-    it (:func:`apc_lab.robot_compare.controller_armature`)."""
-    from apc_lab.robot_compare import controller_armature
+    it, and its friction (:func:`apc_lab.robot_compare.controller_arm_parameters`)."""
+    from apc_lab.robot_compare import controller_arm_parameters
 
     controller = LAWS[law]
     values: dict[str, Any] = {
@@ -286,9 +286,7 @@ def controller_arguments(arm: str, law: str, effects: str) -> list[str]:
     }
     if law == "adaptive recommended":
         values.update(robot_file_overrides(arm))
-    armature = controller_armature(arm, effects)
-    if armature is not None:
-        values["armature"] = armature
+    values.update(controller_arm_parameters(arm, effects))
     args: list[str] = []
     for key, value in values.items():
         args += ["-p", f"robot_node:{key}:={json.dumps(value)}"]

@@ -163,6 +163,12 @@ class ArmEffects:
             raise EffectsError(f"{name} needs {n} values, got {len(values)}")
         return np.array(values, dtype=float)
 
+    def mean_coulomb(self, n: int) -> np.ndarray:
+        """The Coulomb level of each joint as one magnitude for both directions, the mean of
+        the two (N m, (n,)): what a symmetric friction model (MuJoCo's ``frictionloss``, the
+        controllers' ``friction``) takes of an arm whose two directions differ."""
+        return 0.5 * (self.per_joint("coulomb_pos_nm", n) + self.per_joint("coulomb_neg_nm", n))
+
 
 def puma560_effects(
     velocity: VelocitySource = "difference", command_delay: int = 1, seed: int = 0

@@ -150,9 +150,8 @@ def effects_from_values(values: Mapping[str, Any], n: int) -> ArmEffects:
         raise ConfigError(
             f"parameter 'effects': must be one of {', '.join(EFFECT_PRESETS)}, got {preset!r}"
         )
-    coulomb = tuple(
-        0.5 * (p + m) for p, m in zip(base.coulomb_pos_nm, base.coulomb_neg_nm, strict=True)
-    )
+    has_coulomb = bool(base.coulomb_pos_nm or base.coulomb_neg_nm)
+    coulomb = tuple(base.mean_coulomb(n).tolist()) if has_coulomb else ()
     chosen: dict[str, Any] = {}
     for param, field, preset_value in (
         ("damping", "viscous_nm_s", base.viscous_nm_s),
