@@ -6,8 +6,16 @@ nominal point (Eq. 14) are
     A = [[0, I], [d q''/d q, d q''/d q']],   B = [[0], [D(q)^-1]],
 
 taken from Pinocchio's analytical ABA derivatives (``computeABADerivatives``) on the
-*controller's* model. Eq. 33 gives the initial discrete model ``F(0), G(0)`` as a truncated
-series of the zero-order-hold discretisation:
+*controller's* model. Where that model has joint friction (``model.damping`` viscous b,
+``model.friction`` Coulomb f: :func:`apc_feedforward.nominal.joint_friction`), which ABA
+leaves out, the nominal torque carries it, ``u_n = RNEA + b q' + f tanh(q' / v_s)``; the
+arm's acceleration under ``u_n`` is then ABA's under ``u_n`` less that friction, and the
+viscous part slows the arm, ``d q''/d q' -= D^-1 b``. The Coulomb term's slope is its
+smoothing's (``f / v_s`` at rest, thousands of N m s/rad), not the arm's: a perturbation about
+a moving set point meets the same Coulomb level, so it is left out of ``A``.
+
+Eq. 33 gives the initial discrete model ``F(0), G(0)`` as a truncated series of the
+zero-order-hold discretisation:
 
     F(0) = I + A T + A^2 T^2 / 2                               (Eq. 33a)
     G(0) = B T + A B T^2 / 2 + A^2 B T^3 / 6                   (Eq. 33b, corrected)
@@ -56,6 +64,8 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from apc_feedforward.nominal import friction_torque, joint_friction
+
 SeriesForm = Literal["corrected", "printed"]
 
 
@@ -92,12 +102,17 @@ def continuous_jacobians(
     q = _vector(q, n, "q")
     qd = _vector(qd, n, "qd")
     tau = _vector(tau, n, "tau")
+    friction = joint_friction(model)
+    if friction is not None:  # ABA has no friction: its torque is u_n's rigid-body part
+        tau = tau - friction_torque(friction, qd)
     ddq_dq, ddq_dv, minv = pin.computeABADerivatives(model, data, q, qd, tau)
     minv = 0.5 * (minv + minv.T)
     A = np.zeros((2 * n, 2 * n))
     A[:n, n:] = np.eye(n)
     A[n:, :n] = ddq_dq
     A[n:, n:] = ddq_dv
+    if friction is not None:
+        A[n:, n:] -= minv * friction[0]  # D^-1 b: the viscous friction's slope
     B = np.zeros((2 * n, n))
     B[n:, :] = minv
     return A, B
@@ -392,6 +407,7 @@ class SetpointLinearization:
         self._A[:n, n:] = np.eye(n)
         self._B = np.zeros((2 * n, n))
         self._eye = np.eye(2 * n)
+        self._friction = joint_friction(model)
 
     def __call__(
         self,
@@ -406,12 +422,16 @@ class SetpointLinearization:
         ``stencil``, in the coordinates of a sample whose velocity it is
         (:func:`sampled_coordinates`)."""
         n, T, lags = self._n, self.period, self.input_lags
-        A, B = self._A, self._B
+        A, B, friction = self._A, self._B, self._friction
+        if friction is not None:  # as continuous_jacobians
+            tau = tau - friction_torque(friction, qd)
         ddq_dq, ddq_dv, minv = pin.computeABADerivatives(self.model, self.data, q, qd, tau)
         A[n:, :n] = ddq_dq
         A[n:, n:] = ddq_dv
         np.add(minv, minv.T, out=B[n:])
         B[n:] *= 0.5
+        if friction is not None:
+            A[n:, n:] -= B[n:] * friction[0]
         series = _Series(A.copy(), B.copy(), self._c2, self._c3)
         p = 2 * n
         out = np.zeros((p, p + (lags + 1) * n))

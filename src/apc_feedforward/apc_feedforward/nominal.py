@@ -62,6 +62,13 @@ def joint_friction(model: pin.Model) -> tuple[np.ndarray, np.ndarray] | None:
     return None if not (viscous.any() or coulomb.any()) else (viscous, coulomb)
 
 
+def friction_torque(friction: tuple[np.ndarray, np.ndarray], qd: np.ndarray) -> np.ndarray:
+    """The joints' ``friction`` (:func:`joint_friction`) at velocity ``qd``: ``b qd + f tanh(qd
+    / FRICTION_SPEED)`` (N m, (n,))."""
+    viscous, coulomb = friction
+    return viscous * qd + coulomb * np.tanh(np.asarray(qd) / FRICTION_SPEED)
+
+
 def nominal_torque(
     model: pin.Model,
     data: pin.Data,
@@ -77,8 +84,7 @@ def nominal_torque(
     (docs/robot.md, "What sets the physical PUMA's miss at 100 Hz")."""
     tau = pin.rnea(model, data, q, qd, qdd)
     if friction is not None:
-        viscous, coulomb = friction
-        tau = tau + viscous * qd + coulomb * np.tanh(np.asarray(qd) / FRICTION_SPEED)
+        tau = tau + friction_torque(friction, qd)
     if not np.logical_and.reduce(np.isfinite(tau)):  # np.all's wrapper costs more (per sample)
         raise FeedforwardError("nominal torque is not finite (check the set point)")
     return np.array(tau, dtype=float)

@@ -62,6 +62,40 @@ def test_jacobian_blocks_match_finite_differences_of_aba(puma):
     np.testing.assert_allclose(B[3:] @ D, np.eye(3), atol=1e-12)
 
 
+def test_a_model_with_friction_is_linearised_about_the_arm_its_nominal_torque_moves(puma):
+    """With joint friction (``with_friction``) the nominal torque carries it and ABA does not:
+    A and B are the arm's, ``q'' = ABA(q, q', u - b q' - f tanh(q' / v_s))``, against central
+    differences at speeds where the Coulomb term is flat (its slope, the smoothing's, is left
+    out); ``SetpointLinearization`` agrees; without friction the Jacobians are ABA's."""
+    from apc_core.robot import with_friction
+    from apc_feedback.linearize import SetpointLinearization
+    from apc_feedforward.nominal import friction_torque, joint_friction
+
+    told = with_friction(puma, [25.98, 10.62, 6.36], [5.80, 9.50, 3.98])
+    model = told.model
+    friction = joint_friction(model)
+    rng = np.random.default_rng(1)
+    q, tau = rng.normal(size=3), 10 * rng.normal(size=3)
+    qd = np.array([0.6, -0.8, 1.1])  # |q'| / v_s >= 60: tanh's slope below 1e-50
+
+    def f(x, u):
+        rigid = u - friction_torque(friction, x[3:])
+        return np.concatenate([x[3:], pin.aba(model, model.createData(), x[:3], x[3:], rigid)])
+
+    A, B = continuous_jacobians(model, model.createData(), q, qd, tau)
+    x0, eps = np.concatenate([q, qd]), 1e-6
+    A_fd = np.column_stack(
+        [(f(x0 + eps * e, tau) - f(x0 - eps * e, tau)) / (2 * eps) for e in np.eye(6)]
+    )
+    np.testing.assert_allclose(A, A_fd, atol=1e-6)
+    A_rigid, B_rigid = continuous_jacobians(puma.model, puma.model.createData(), q, qd, tau)
+    np.testing.assert_array_equal(B, B_rigid)
+    assert np.abs(A - A_rigid).max() > 1.0  # the friction moves them, by far more than 1e-6
+    F, G = initial_model(model, q, qd, tau, T)
+    FG = SetpointLinearization(model, T)(q, qd, tau)
+    np.testing.assert_allclose(FG, np.hstack([F, G]), rtol=1e-12, atol=1e-14)
+
+
 def test_corrected_series_is_the_zoh_series_to_its_truncation_order(puma):
     """Eq. 33 (corrected) differs from expm by the first omitted terms, A^3 T^3/6 and A^3 B T^4/24.
 
