@@ -17,8 +17,9 @@ the Franka Panda, each carrying robot_compare's case-(c) payload (5 lb; at the P
 centre) that the controllers do not know; the laws computed torque, the JTC-style PID and the
 adaptive law with the recommended preset as the robot file ships it, minus any per-arm
 ``adaptive.*`` override a robot file carries (the shipped ones carry none); on a physical
-PUMA every law is told the arm's rotor inertia (``armature``, as its user tells a geared
-arm's: :func:`apc_lab.robot_compare.controller_armature`). The robot
+arm every law is told its friction (``friction``, ``damping``) and, on the PUMA, its rotor
+inertia (``armature``), as its user tells a geared arm's:
+:func:`apc_lab.robot_compare.controller_arm_parameters`. The robot
 file's ``path_tolerance`` is opened (0: no check) for every law, so that every run finishes
 and the loss rule below is the benchmark's, not the node's abort.
 
