@@ -6,6 +6,10 @@ All are expressed as a perturbation torque ``du = tau - u_n`` so that the plant,
 - :class:`ComputedTorque` — Eq. 36 on the controller's model:
   ``tau = D(q)[qdd_d + Kv (qd_d - qd) + Kp (q_d - q)] + h(q, qd) + c(q)``, evaluated as one
   RNEA call at the measured state with the commanded acceleration. Paper: Kp = 100, Kv = 20.
+  A model with joint friction (the controllers' ``friction``, ``damping``) adds it at the
+  planned velocity, as the nominal torque does (``apc_feedforward.nominal.friction_torque``):
+  RNEA has none, and the measured velocity of quantised encoders would make its Coulomb term
+  chatter.
 - :class:`PD` — ``du = Kp (q_d - q) + Kv (qd_d - qd)`` on top of the nominal torque.
 - :class:`PID` — what a ROS user tries first: ros2_controllers' joint_trajectory_controller on an
   effort interface with the nominal torque as the trajectory's feed-forward effort,
@@ -25,6 +29,7 @@ import pinocchio as pin
 from apc_core.params import check_settings, setting, settings_from
 from apc_feedback.adaptive_config import FeedbackError
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
+from apc_feedforward.nominal import friction_torque, joint_friction
 
 
 @dataclass(frozen=True)
@@ -81,14 +86,17 @@ class ComputedTorque(_RuntimeGains, FeedbackLaw):
         self.model = model
         self.gains = gains or PdGains()
         self._data = model.createData()
+        self._friction = joint_friction(model)
 
     def reset(self) -> None:
         pass
 
     def update(self, k, q, qd, q_d, qd_d, qdd_d, u_n, applied) -> FeedbackOutput:
         qdd_cmd = qdd_d + self.gains.kv * (qd_d - qd) + self.gains.kp * (q_d - q)
-        tau = pin.rnea(self.model, self._data, q, qd, qdd_cmd)
-        return FeedbackOutput(du=np.array(tau, dtype=float) - u_n)
+        tau = np.array(pin.rnea(self.model, self._data, q, qd, qdd_cmd), dtype=float)
+        if self._friction is not None:
+            tau += friction_torque(self._friction, qd_d)
+        return FeedbackOutput(du=tau - u_n)
 
 
 class PD(_RuntimeGains, FeedbackLaw):
