@@ -54,28 +54,6 @@ def test_computed_torque_on_the_plan_is_the_nominal_torque(controller_robot):
     np.testing.assert_allclose(du, 0.0, atol=1e-10)
 
 
-def test_computed_torque_with_friction_adds_it_at_the_planned_velocity(controller_robot):
-    """A model told its joints' friction: Eq. 36 plus ``b qd_d + f tanh(qd_d / v_s)``, so that
-    on the plan it still adds nothing to the nominal torque, which carries the same friction;
-    measured velocity off the plan does not move the friction term."""
-    from apc_core.robot import with_friction
-    from apc_feedforward.nominal import friction_torque, joint_friction, nominal_torque
-
-    model = with_friction(controller_robot, [20.0, 10.0, 5.0], [4.0, 6.0, 2.0]).model
-    data = model.createData()
-    friction = joint_friction(model)
-    q, qd, q_d, qd_d, qdd_d = _random_sample()
-    law = ComputedTorque(model, PdGains(kp=100.0, kv=20.0))
-    u_n = nominal_torque(model, data, q_d, qd_d, qdd_d, friction)
-    np.testing.assert_allclose(law.update(0, q_d, qd_d, q_d, qd_d, qdd_d, u_n, None).du, 0.0,
-                               atol=1e-9)  # fmt: skip
-    rigid = ComputedTorque(controller_robot.model, PdGains(kp=100.0, kv=20.0))
-    u_rigid = pin.rnea(controller_robot.model, data, q_d, qd_d, qdd_d)
-    tau = u_n + law.update(0, q, qd, q_d, qd_d, qdd_d, u_n, None).du
-    tau_rigid = u_rigid + rigid.update(0, q, qd, q_d, qd_d, qdd_d, u_rigid, None).du
-    np.testing.assert_allclose(tau - tau_rigid, friction_torque(friction, qd_d), atol=1e-9)
-
-
 def test_pd_and_none():
     q, qd, q_d, qd_d, qdd_d = _random_sample()
     du = PD(3, PdGains(kp=50.0, kv=5.0)).update(0, q, qd, q_d, qd_d, qdd_d, None, None).du
