@@ -25,6 +25,7 @@ from apc_feedback.supervisor import (
     SupervisorError,
 )
 from apc_feedforward.nominal import Setpoint
+from apc_lab.robot_compare import controller_friction
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_msgs_py import JointSample
 from apc_plant_sim.effects import ArmEffects, puma560_effects
@@ -494,14 +495,6 @@ def test_on_a_100hz_driver_the_law_holds_the_physical_puma_once_the_drives_delay
             assert worst < 3.5
 
 
-def _puma_friction() -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The physical PUMA's friction as a user tells the controllers from the drives' data
-    (``friction``, ``damping``): Coulomb the mean of the two directions', viscous as it is."""
-    effects = puma560_effects()
-    coulomb = (effects.per_joint("coulomb_pos_nm", 3) + effects.per_joint("coulomb_neg_nm", 3)) / 2
-    return tuple(coulomb), tuple(effects.per_joint("viscous_nm_s", 3))
-
-
 def test_told_its_friction_the_law_holds_the_physical_puma_on_a_100hz_driver_after_a_long_hold():
     """The move 1 s after activation, as the wall-time bench sends it, on a 100 Hz driver whose
     drive adds a cycle: a command acts 20 ms after its state, too late for feedback to correct
@@ -527,7 +520,7 @@ def test_told_its_friction_the_law_holds_the_physical_puma_on_a_100hz_driver_aft
         )
 
     for payload in PAYLOADS_KG:
-        told = run(payload, _puma_friction())
+        told = run(payload, controller_friction("puma3", "physical"))
         assert told.max_tracking_error_deg() < 1.0
         assert told.tracking_error_at_move_end_deg().max() < 0.2
         assert "supervisor.handovers" not in told.counts
