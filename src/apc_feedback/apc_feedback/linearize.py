@@ -64,7 +64,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from apc_feedforward.nominal import friction_torque, joint_friction
+from apc_feedforward.nominal import JointFriction, friction_torque, joint_friction
 
 SeriesForm = Literal["corrected", "printed"]
 
@@ -80,6 +80,28 @@ def _vector(value: np.ndarray, n: int, name: str) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise LinearizeError(f"{name} must be finite")
     return arr
+
+
+def _aba_derivatives(
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    qd: np.ndarray,
+    tau: np.ndarray,
+    friction: JointFriction | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``d qdd / dq``, ``d qdd / dqd`` and ``D^-1`` (symmetrised) of the arm at ``(q, qd,
+    tau)`` with its joints' ``friction``: ABA has none, so it runs at ``tau``'s rigid-body
+    part (``tau`` less the friction at ``qd``, as :func:`apc_feedforward.nominal.nominal_torque`
+    adds it) and the viscous friction's slope ``D^-1 b`` leaves the velocity block. The Coulomb
+    term's slope (steep through zero speed, flat elsewhere) is left out."""
+    if friction is not None:
+        tau = tau - friction_torque(friction, qd)
+    ddq_dq, ddq_dv, minv = pin.computeABADerivatives(model, data, q, qd, tau)
+    minv = 0.5 * (minv + minv.T)
+    if friction is not None:
+        ddq_dv = ddq_dv - minv * friction.viscous
+    return ddq_dq, ddq_dv, minv
 
 
 def continuous_jacobians(
@@ -102,17 +124,11 @@ def continuous_jacobians(
     q = _vector(q, n, "q")
     qd = _vector(qd, n, "qd")
     tau = _vector(tau, n, "tau")
-    friction = joint_friction(model)
-    if friction is not None:  # ABA has no friction: its torque is u_n's rigid-body part
-        tau = tau - friction_torque(friction, qd)
-    ddq_dq, ddq_dv, minv = pin.computeABADerivatives(model, data, q, qd, tau)
-    minv = 0.5 * (minv + minv.T)
+    ddq_dq, ddq_dv, minv = _aba_derivatives(model, data, q, qd, tau, joint_friction(model))
     A = np.zeros((2 * n, 2 * n))
     A[:n, n:] = np.eye(n)
     A[n:, :n] = ddq_dq
     A[n:, n:] = ddq_dv
-    if friction is not None:
-        A[n:, n:] -= minv * friction[0]  # D^-1 b: the viscous friction's slope
     B = np.zeros((2 * n, n))
     B[n:, :] = minv
     return A, B
@@ -422,16 +438,10 @@ class SetpointLinearization:
         ``stencil``, in the coordinates of a sample whose velocity it is
         (:func:`sampled_coordinates`)."""
         n, T, lags = self._n, self.period, self.input_lags
-        A, B, friction = self._A, self._B, self._friction
-        if friction is not None:  # as continuous_jacobians
-            tau = tau - friction_torque(friction, qd)
-        ddq_dq, ddq_dv, minv = pin.computeABADerivatives(self.model, self.data, q, qd, tau)
-        A[n:, :n] = ddq_dq
-        A[n:, n:] = ddq_dv
-        np.add(minv, minv.T, out=B[n:])
-        B[n:] *= 0.5
-        if friction is not None:
-            A[n:, n:] -= B[n:] * friction[0]
+        A, B = self._A, self._B
+        A[n:, :n], A[n:, n:], B[n:] = _aba_derivatives(
+            self.model, self.data, q, qd, tau, self._friction
+        )
         series = _Series(A.copy(), B.copy(), self._c2, self._c3)
         p = 2 * n
         out = np.zeros((p, p + (lags + 1) * n))

@@ -10,6 +10,7 @@ Eqs. 2-8 in spatial-algebra form: a forward pass for link velocities and acceler
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -54,19 +55,26 @@ class Setpoint:
 FRICTION_SPEED = 0.01
 
 
-def joint_friction(model: pin.Model) -> tuple[np.ndarray, np.ndarray] | None:
-    """The model's friction, ``(viscous N m s/rad, Coulomb N m)`` per joint (Pinocchio's
-    ``model.damping`` and ``model.friction``, as :func:`apc_core.robot.with_friction` sets
-    them); None where both are zero."""
-    viscous, coulomb = np.array(model.damping, dtype=float), np.array(model.friction, dtype=float)
-    return None if not (viscous.any() or coulomb.any()) else (viscous, coulomb)
+class JointFriction(NamedTuple):
+    """A model's joint friction, per joint, in the order :func:`apc_core.robot.with_friction`
+    takes it."""
+
+    coulomb: np.ndarray  # N m (Pinocchio's ``model.friction``)
+    viscous: np.ndarray  # N m s/rad (Pinocchio's ``model.damping``)
 
 
-def friction_torque(friction: tuple[np.ndarray, np.ndarray], qd: np.ndarray) -> np.ndarray:
+def joint_friction(model: pin.Model) -> JointFriction | None:
+    """The model's friction (Pinocchio's ``model.friction`` and ``model.damping``, as
+    :func:`apc_core.robot.with_friction` sets them); None where both are zero."""
+    coulomb = np.array(model.friction, dtype=float)
+    viscous = np.array(model.damping, dtype=float)
+    return JointFriction(coulomb, viscous) if coulomb.any() or viscous.any() else None
+
+
+def friction_torque(friction: JointFriction, qd: np.ndarray) -> np.ndarray:
     """The joints' ``friction`` (:func:`joint_friction`) at velocity ``qd``: ``b qd + f tanh(qd
     / FRICTION_SPEED)`` (N m, (n,))."""
-    viscous, coulomb = friction
-    return viscous * qd + coulomb * np.tanh(np.asarray(qd) / FRICTION_SPEED)
+    return friction.viscous * qd + friction.coulomb * np.tanh(np.asarray(qd) / FRICTION_SPEED)
 
 
 def nominal_torque(
@@ -75,7 +83,7 @@ def nominal_torque(
     q: np.ndarray,
     qd: np.ndarray,
     qdd: np.ndarray,
-    friction: tuple[np.ndarray, np.ndarray] | None = None,
+    friction: JointFriction | None = None,
 ) -> np.ndarray:
     """``u_n = D(q) qdd + h(q, qd) + c(q)`` by recursive Newton-Euler (Eqs. 2-8), shape (n,),
     plus the joints' ``friction`` (:func:`joint_friction`) at the planned velocity:
