@@ -20,8 +20,8 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
-from apc_feedback.arrays import all_true
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
+from apc_feedback.input_gain_check import velocity_gain_physical
 from apc_feedback.input_timing import InputTiming
 from apc_feedback.lagged_control import (
     RING_CHECK_PERIOD_S,
@@ -36,20 +36,6 @@ from apc_feedback.linearize import SetpointLinearization, VelocityStencil, initi
 from apc_feedback.optimal import OneStepControl, RecedingHorizonControl, validate_weights
 from apc_feedback.rls import Rls, RlsError
 
-#: With ``relinearize``, ``project_g`` refuses an identification step that would leave a
-#: diagonal entry of Ĝ's velocity block under this fraction of the current set point's prior
-#: (Eq. 33 there) lower than it was: an arm ten times heavier about a joint than its model is
-#: beyond any payload the prior leaves to the identifier. An entry the move to a new set point
-#: took a little under may climb back; one under half of it (put there from outside: a
-#: corrupted estimate) may move freely, so that the identifier can repair it. Scaling the
-#: input's column back up instead, after a step or a move, kept the identification going but
-#: let the off-diagonal entries grow until Ĝ pushed a direction the wrong way. In closed loop a
-#: disturbance the law cancels (an unknown payload's torques along a move) makes the data say
-#: the torque does nothing, and the PUMA's Ĝ₁₁ drifts from 0.7 of the prior (the payload's
-#: true share) to 0 and below. Without ``relinearize`` the prior is the first set point's, from
-#: which the Panda's true gain moves 0.19-6.9 times on a move: no relative bound there, only
-#: the sign.
-RELATIVE_GAIN_FLOOR = 0.1
 #: With ``relinearize``, Eq. 33 is taken again at most this often (s of samples): an arm's
 #: inertia changes on the time scale of a move, and at T = 1 ms taking it every sample cost the
 #: 1 kHz robot path a third more late commands (``bench/robot_loop.py``) for a prior that moves
@@ -463,25 +449,14 @@ class AdaptiveFeedback(FeedbackLaw):
         self.input_timing.expect_stencil(stencil)
 
     def _g_physical(self, before: np.ndarray | None = None) -> bool:
-        """The diagonal of Ĝ's velocity block (≈ T (D⁻¹)_ii) is positive; with
-        ``relinearize`` (``before``: the diagonal before the step) no entry ends under
-        :data:`RELATIVE_GAIN_FLOOR` of the current set point's prior lower than it was, unless
-        it was under half the floor already (put there from outside, it may move freely).
-
-        ``(D⁻¹)_ii > 0`` for any arm. Stricter tests do worse (``bench/preset_sweep.py``,
-        ``bench/long_run.py``): positive definiteness of the whole block fails from the start on
-        the six-joint PUMA (Eq. 33's ``A B T²/2`` makes ``Ĝ(0)`` non-symmetric, wrist inertias
-        are ~1e-4 of the arm's); bounds relative to ``Ĝ(0)`` destabilise the Panda; and
-        explaining a refused step's residual as a jump of ``ŵ`` destabilises an hour-long run.
-        """
-        diagonal = self._velocity_gain().diagonal()
-        if not all_true(diagonal > 0.0):
-            return False
-        if before is None:
-            return True
-        assert self._prior_input_gain is not None  # relinearize: the prior is this set point's
-        floor = RELATIVE_GAIN_FLOOR * self._prior_input_gain[self.n_joints :].diagonal()
-        return bool(all_true((diagonal > floor) | (diagonal >= before) | (before <= 0.5 * floor)))
+        """:func:`~apc_feedback.input_gain_check.velocity_gain_physical` of Ĝ now (``before``:
+        the diagonal before the step, with ``relinearize``)."""
+        prior = self._prior_input_gain
+        return velocity_gain_physical(
+            self._velocity_gain().diagonal(),
+            None if prior is None else prior[self.n_joints :].diagonal(),
+            before,
+        )
 
     def _velocity_gain(self) -> np.ndarray:
         """Ĝ's velocity block (with lags, their sum), (n, n); a view without lags."""
