@@ -4,10 +4,11 @@ A machine that stalls as the controllers start makes their first commands late: 
 effort shows delays that the driver does not always take, robot mode tells the law each
 (docs/robot.md, "A burst of late commands at activation"). Robot mode's loop closed offline
 (:func:`apc_lab.robot_offline.run_robot_loop`, no ROS, **simulated time**, deterministic): the
-physical PUMA (3 joints) and Panda of the wall-time grid (every effect of ``robot_sim``'s
-``effects: puma560`` / ``panda``, the controllers told the rotor inertia and friction, 5 lb
-they do not know), case (c)'s move 1 s after activation, the preset supervised as shipped, at
-drivers of 100, 250 and 500 Hz. Two kinds of runs a cell:
+physical PUMA (3 joints) and Panda of the wall-time grid, run as the offline grid runs them
+(``bench/robot_clock_offline.py``: every effect of ``robot_sim``'s ``effects: puma560`` /
+``panda``, the controllers told the rotor inertia and friction, 5 lb they do not know, case
+(c)'s move 1 s after activation), the preset supervised as shipped, at drivers of 100, 250 and
+500 Hz. Two kinds of runs a cell:
 
 - ``burst``: the first :data:`BURST_COMMANDS` commands one or two driver periods late
   (:data:`BURST_PERIODS`), the rest on time;
@@ -16,8 +17,8 @@ drivers of 100, 250 and 500 Hz. Two kinds of runs a cell:
 
 Per cell: the runs handed over to the fallback, the runs beyond 2 deg and beyond
 :data:`~apc_lab.wall_clock.LOST_DEG` (lost), the worst and the median max error and the worst
-error at the move's end (deg, worst joint). About two minutes on one core; the JSON keeps every
-run.
+error at the move's end (deg, worst joint). About three minutes on one core; the JSON keeps
+every run.
 
     .venv/bin/python bench/activation_bursts.py [--arms panda] [--rates 250] [--json FILE]
 """
@@ -32,16 +33,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import robot_clock_offline
 
 from apc_feedback.supervisor import SupervisorConfig
-from apc_lab.robot_compare import (
-    ARM_EFFECTS,
-    arm_scenario,
-    controller_armature,
-    controller_friction,
-)
-from apc_lab.robot_offline import Latency, run_robot_loop
-from apc_lab.wall_clock import HOLD_BEFORE_S, LOST_DEG
+from apc_lab.robot_offline import Latency
+from apc_lab.wall_clock import LOST_DEG
 
 ARMS = ("puma3", "panda")
 RATES_HZ = (100, 250, 500)
@@ -51,8 +47,6 @@ BURST_COMMANDS = (3, 4, 5, 6, 8, 12, 20)
 BURST_PERIODS = (1, 2)
 #: The payload times these in the ``late`` runs (run i draws its late commands with seed i).
 PAYLOAD_FACTORS = (0.98, 0.985, 0.99, 0.995, 1.0, 1.005, 1.01, 1.015)
-#: Seconds of the move, and of the hold after it, in every run.
-MOVE_S, AFTER_S = 1.0, 0.5
 #: A run's error beyond this (deg) counts as a large excursion (not lost).
 LARGE_DEG = 2.0
 RESULTS_JSON = Path(__file__).resolve().parent / "activation_bursts.json"
@@ -81,29 +75,24 @@ def latency(run: dict[str, Any], driver_ms: float) -> Latency:
 
 
 def one_run(arm: str, rate_hz: float, run: dict[str, Any]) -> dict[str, Any]:
-    """One run's max error and error at the move's end (worst joint, deg) and hand-overs."""
-    scenario = arm_scenario(arm, "c")
-    driver_ms = 1000.0 / rate_hz
-    result = run_robot_loop(
-        HOLD_BEFORE_S + MOVE_S + AFTER_S,
-        goal_deg=scenario.q_goal_deg,
-        hold_s=HOLD_BEFORE_S,
-        driver_ms=driver_ms,
-        phase_ms=0.37 * driver_ms,
-        transport_ms=0.3 * min(1.0, driver_ms),
-        payload_kg=scenario.payload_kg * run["payload"],
-        latency=latency(run, driver_ms),
-        supervisor=SupervisorConfig(),
-        effects=ARM_EFFECTS[arm](),
-        arm=scenario,
-        armature=controller_armature(arm, "physical"),
-        friction=controller_friction(arm, "physical"),
+    """One run (the offline grid's, :func:`robot_clock_offline.one_run`, with this run's
+    lateness and payload): its max error and error at the move's end (worst joint, deg) and
+    hand-overs."""
+    result = robot_clock_offline.one_run(
+        arm,
+        "physical",
+        rate_hz,
+        False,
+        0,
+        SupervisorConfig(),
+        latency=latency(run, 1000.0 / rate_hz),
+        payload_factor=run["payload"],
     )
     return {
         **run,
-        "max_deg": round(_finite(result.tracking_error_deg().max()), 3),
-        "move_end_deg": round(_finite(result.tracking_error_at_move_end_deg().max()), 3),
-        "handovers": int(result.counts.get("supervisor.handovers", 0)),
+        "max_deg": round(_finite(np.max(result["max_deg"])), 3),
+        "move_end_deg": round(_finite(np.max(result["move_end_deg"])), 3),
+        "handovers": int(result["handovers"]),
     }
 
 

@@ -98,6 +98,8 @@ def one_run(
     armature: bool = True,
     feedforward_ahead: bool = True,
     friction: bool = True,
+    latency: Latency | None = None,
+    payload_factor: float | None = None,
 ) -> dict:
     """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
     joint (deg), hand-overs, the commands' chatter in the hold (N m).
@@ -106,8 +108,14 @@ def one_run(
     ``physical``); ``setup``: as :func:`run_robot_loop`'s (to tell or change the law before
     activation); ``armature``, ``friction``: the controllers of a ``physical`` arm are told its
     rotor inertia (:func:`controller_armature`), its friction (:func:`controller_friction`;
-    neither for effects given as themselves: what they cost unknown).
+    neither for effects given as themselves: what they cost unknown). ``latency``, in place
+    of ``late``'s, and ``payload_factor``, in place of :data:`PAYLOAD_FACTORS`' ``index``-th:
+    for runs outside the grid (``bench/activation_bursts.py``).
     """
+    if latency is None and late:
+        latency = Latency(late_ms=1000.0 / rate_hz, probability=0.3, seed=index)
+    if payload_factor is None:
+        payload_factor = PAYLOAD_FACTORS[index]
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
     if isinstance(effects, ArmEffects):
@@ -121,8 +129,8 @@ def one_run(
         driver_ms=driver_ms,
         phase_ms=0.37 * driver_ms,
         transport_ms=0.3 * min(1.0, driver_ms),
-        payload_kg=scenario.payload_kg * PAYLOAD_FACTORS[index],
-        latency=Latency(late_ms=driver_ms, probability=0.3, seed=index) if late else None,
+        payload_kg=scenario.payload_kg * payload_factor,
+        latency=latency,
         supervisor=supervisor,
         effects=arm_effects,
         arm=scenario,
