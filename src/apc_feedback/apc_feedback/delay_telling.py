@@ -15,8 +15,20 @@ CommandEcho`); the law models the delay it is told (its input lags split by it).
   the delay stays told while the echo measures it, so that a command late now and then does
   not restart the law twice.
 
-Else none: the law assumes a driver period and scores two. Each only within the lags the law
-can carry with the samples' velocity.
+Else none: the law assumes a driver period and scores two. A delay longer than the lags the
+law carries with the samples' velocity can hold is told as the longest they hold
+(:meth:`DelayTelling.carried_ns`: ``MAX_INPUT_LAGS`` samples less the velocity's span) where
+that reaches two driver periods, the longest the law would otherwise score; else none, the
+law scoring one and two. Of what the law can be told, that is nearest to when the arm
+applies the command. A burst of late commands at activation on the physical Panda at 100 Hz
+has commands act 30 ms after their state, which with the drive's differenced velocity needs
+four lags: told none, the 10 ms driver period with 20 ms scored, at the restart that
+velocity brings, the law diverged before a restart could take the better score and was
+handed over (the computed-torque fallback, its gains set for 10 ms, then swung the arm up
+to 9 deg in such runs); told 20 ms it holds (docs/robot.md, "A burst of late commands at
+activation"). Robot mode's own velocity estimate on a positions-only 100 Hz driver spans
+20 ms, so there the lags hold only 10 ms and none is told: scoring 20 ms is what holds the
+PUMA whose every command is a period late.
 
 A told delay is told again when the one robot mode would tell now differs from it by half a
 driver period or more. A longer one only once it has lasted :data:`RETELL_S`: a machine whose
@@ -37,8 +49,8 @@ then on 8 ms within a few samples and lost the arm alone (13-79 deg). With a dif
 velocity none is what a jittering delay under a sample is told for good, and it is told at
 once (held a window, the physical Panda at 250 Hz with 30 % of its commands late, told 12 ms
 at activation, was lost in one run of five). None where the echo shows a longer delay than
-the told one (one that needs more lags than the law carries) waits as a longer delay does; a
-wait of another kind than the one under way starts its count afresh. Every
+the told one waits as a longer delay does; a wait of another kind than the one under way
+starts its count afresh. Every
 (re)start of the law tells it the delay measured then, longer or not (an activation, a
 fault's recovery, an abort, a velocity of another kind). Plain Python: no rclpy.
 """
@@ -47,7 +59,7 @@ from __future__ import annotations
 
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.command_echo import ECHOES, CommandEcho
-from apc_feedback.linearize import stencil_lags
+from apc_feedback.linearize import VelocityStencil, stencil_lags
 from apc_feedback.robot_sampling import RobotSampler
 
 #: How long a told delay must be measured otherwise before it is told again (s).
@@ -92,15 +104,25 @@ class DelayTelling:
             )
         ):
             return None
-        needed = stencil_lags(sampler.velocity_stencil(), self.period_ns * 1e-9, measured * 1e-9)
-        return measured if needed <= MAX_INPUT_LAGS else None
+        stencil = sampler.velocity_stencil()
+        needed = stencil_lags(stencil, self.period_ns * 1e-9, measured * 1e-9)
+        if needed <= MAX_INPUT_LAGS:
+            return measured
+        carried = self.carried_ns(stencil)
+        return carried if carried >= 2 * sampler.driver_period_ns else None
+
+    def carried_ns(self, stencil: VelocityStencil | None) -> int:
+        """The longest delay the law's lags hold with samples whose velocity is ``stencil``
+        (ns): ``MAX_INPUT_LAGS`` samples less the stencil's span."""
+        span_s = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
+        return max(0, MAX_INPUT_LAGS * self.period_ns - round(span_s * 1e9))
 
     def moved(self, k: int) -> bool:
         """Whether at sample ``k`` the delay to tell differs from the one told (the measured one,
         else the driver period) by half a driver period or more: at once where none was
         measured when the law was told or where a shorter one is measured, a longer one after
         :data:`RETELL_S` of it (also none where the echo shows a longer delay than the told
-        one, e.g. one that needs more lags than the law carries), none where echoes under the
+        one), none where echoes under the
         told delay disagree with the arm's velocity after :attr:`disagree_samples`, else at
         once. A wait of another kind starts its count afresh."""
         last, self._last_k = self._last_k, k

@@ -146,13 +146,43 @@ def test_a_wait_of_another_kind_starts_its_count_afresh():
 
 
 def test_a_delay_longer_than_the_law_carries_waits_as_a_longer_one():
-    """40 ms at T = 10 ms needs more lags than the law carries, so none would be told; the echo
-    shows it longer than the 12 ms told, and it waits RETELL_S as a longer delay does, with
-    either kind of velocity."""
+    """40 ms at T = 10 ms needs more lags than the law carries (three), so the longest they hold
+    would be told, 30 ms; it is longer than the 12 ms told, and it waits RETELL_S as a longer
+    delay does, with either kind of velocity."""
     for arms in (True, False):
         telling, measure = _telling(12.0)
         telling.tell()
         telling.sampler.velocity_is_the_arms = lambda arms=arms: arms
         measure(40.0)
-        assert telling.measured_ns() is None
+        assert telling.measured_ns() == 30 * MS
         assert _told_once_lasted(telling, 1)
+        assert telling.tell() == 30 * MS
+
+
+def _on_a_100hz_driver(measured_ms: float, span_s: float):
+    from apc_feedback.linearize import VelocityStencil
+
+    telling, _ = _telling(measured_ms)
+    telling.sampler.driver_period_ns = 10 * MS
+    telling.sampler.velocity_is_the_arms = lambda: False
+    stencil = VelocityStencil(offsets=(0.0, span_s), weights=(1 / span_s, -1 / span_s))
+    telling.sampler.velocity_stencil = lambda: stencil
+    return telling
+
+
+def test_a_delay_longer_than_the_lags_hold_is_told_as_the_longest_they_hold():
+    """A 100 Hz drive's velocity differenced over its 10 ms period spans one of the three lags:
+    20 ms is held and told as it is; 30 ms (a burst of late commands where the drive adds a
+    cycle) and longer are told as 20 ms, nearer to the arm than none (the driver period, with
+    20 ms only scored)."""
+    for measured_ms in (20.0, 30.0, 60.0):
+        assert _on_a_100hz_driver(measured_ms, 0.01).tell() == 20 * MS
+    assert _on_a_100hz_driver(30.0, 0.01).carried_ns(None) == 30 * MS
+
+
+def test_where_the_lags_hold_less_than_the_law_scores_none_is_told():
+    """Robot mode's own estimate on a positions-only 100 Hz driver spans 20 ms: the lags hold
+    10 ms, the driver period, and none is told, so that the law scores 20 ms beside it."""
+    telling = _on_a_100hz_driver(20.0, 0.02)
+    assert telling.carried_ns(telling.sampler.velocity_stencil()) == 10 * MS
+    assert telling.tell() is None
