@@ -59,7 +59,7 @@ from __future__ import annotations
 
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS
 from apc_feedback.command_echo import ECHOES, CommandEcho
-from apc_feedback.linearize import VelocityStencil, stencil_lags
+from apc_feedback.linearize import VelocityStencil, stencil_lags, stencil_span
 from apc_feedback.robot_sampling import RobotSampler
 
 #: How long a told delay must be measured otherwise before it is told again (s).
@@ -114,8 +114,7 @@ class DelayTelling:
     def carried_ns(self, stencil: VelocityStencil | None) -> int:
         """The longest delay the law's lags hold with samples whose velocity is ``stencil``
         (ns): ``MAX_INPUT_LAGS`` samples less the stencil's span."""
-        span_s = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
-        return max(0, MAX_INPUT_LAGS * self.period_ns - round(span_s * 1e9))
+        return max(0, MAX_INPUT_LAGS * self.period_ns - round(stencil_span(stencil) * 1e9))
 
     def moved(self, k: int) -> bool:
         """Whether at sample ``k`` the delay to tell differs from the one told (the measured one,

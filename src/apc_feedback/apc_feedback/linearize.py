@@ -255,12 +255,16 @@ class VelocityStencil(NamedTuple):
 LAG_SLACK = 0.01
 
 
+def stencil_span(stencil: VelocityStencil | None) -> float:
+    """How far back the positions of a sampled velocity reach (s): 0 for a measured one."""
+    return max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
+
+
 def stencil_lags(stencil: VelocityStencil | None, period: float, delay: float) -> int:
     """The input lags the exact model of a sample needs: the inputs that acted over the
-    stencil's span or are still on their way, ``ceil((delay + span) / T)`` (within
-    :data:`LAG_SLACK` of a whole number, that number)."""
-    span = max(stencil.offsets) if stencil is not None and stencil.offsets else 0.0
-    return math.ceil((delay + span) / period - LAG_SLACK)
+    stencil's span (:func:`stencil_span`) or are still on their way, ``ceil((delay + span) /
+    T)`` (within :data:`LAG_SLACK` of a whole number, that number)."""
+    return math.ceil((delay + stencil_span(stencil)) / period - LAG_SLACK)
 
 
 #: ``c₂, c₃`` of Eq. 33b's series ``Γ(s) = B s + A B s² c₂ + A² B s³ c₃`` in each form.
