@@ -112,12 +112,12 @@ def one_run(
     of ``late``'s, and ``payload_factor``, in place of :data:`PAYLOAD_FACTORS`' ``index``-th:
     for runs outside the grid (``bench/activation_bursts.py``).
     """
-    if latency is None and late:
-        latency = Latency(late_ms=1000.0 / rate_hz, probability=0.3, seed=index)
-    if payload_factor is None:
-        payload_factor = PAYLOAD_FACTORS[index]
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
+    if latency is None and late:
+        latency = Latency(late_ms=driver_ms, probability=0.3, seed=index)
+    if payload_factor is None:
+        payload_factor = PAYLOAD_FACTORS[index]
     if isinstance(effects, ArmEffects):
         arm_effects: ArmEffects | None = effects
     else:

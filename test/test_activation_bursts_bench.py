@@ -3,22 +3,14 @@ each gives its commands, and how a cell is summed up (the figures come from full
 
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
-
 import pytest
-
-BENCH = Path(__file__).resolve().parents[1] / "bench"
+from support.bench import bench_module
 
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(BENCH))
-    try:
-        yield importlib.import_module("activation_bursts")
-    finally:
-        sys.path.remove(str(BENCH))
+    with bench_module("activation_bursts") as module:
+        yield module
 
 
 def test_a_cell_has_every_burst_and_every_late_run_once(bench):

@@ -8,27 +8,20 @@ time, and the delay and velocity stencil a ``told`` law receives in place of rob
 from __future__ import annotations
 
 import argparse
-import importlib
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from support.bench import bench_module
 
 from apc_feedback.linearize import VelocityStencil
 from apc_lab.robot_compare import ARM_EFFECTS
 from apc_plant_sim.effects import ArmEffects
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
-
 
 @pytest.fixture(scope="module")
 def sde():
-    sys.path.insert(0, str(BENCH))
-    try:
-        yield importlib.import_module("slow_driver_effects")
-    finally:
-        sys.path.remove(str(BENCH))
+    with bench_module("slow_driver_effects") as module:
+        yield module
 
 
 class _Law:
