@@ -57,7 +57,7 @@ from apc_lab.experiment import (
     overrides,
     wait_for,
 )
-from apc_lab.run_recorder import recorder_node
+from apc_lab.run_recorder import recorder_node, take_what_is_queued
 from apc_lab.scenario import (
     CONFIG_DIR,
     PAPER_CASES,
@@ -383,7 +383,9 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
     path = out_dir / f"{case.name}.mcap"
     params = node_parameters(case)
     scenario = case.scenario
-    end_s = HOLD_BEFORE_S + scenario.duration + HOLD_AFTER_S
+    # A sample period past the hold after the move: the robot's state of the hold's last
+    # sample is out (and so answered) before the robot stops.
+    end_s = HOLD_BEFORE_S + scenario.duration + HOLD_AFTER_S + scenario.period
     with StopSignals() as stop:
         context = rclpy.Context()
         rclpy.init(context=context)
@@ -438,12 +440,14 @@ def run_case(case: RobotCase, out_dir: Path, *, timeout_s: float = 120.0) -> Rob
                 if not sent and robot.driver_time >= HOLD_BEFORE_S:
                     goal_pub.publish(goal)
                     sent = True
-            # The recorder takes what is still queued.
-            drain_until = time.monotonic() + 0.2
-            while time.monotonic() < drain_until:
-                executor.spin_once(timeout_sec=0.01)
             counts = controller.diagnostics.counters
             faults = {k: counts.get(k, 0) for k in ("watchdog", "path_tolerance_aborts")}
+            # The robot stops (no more states, so no more samples), and the recorder takes
+            # what is still queued for it until it has taken nothing for a while: however far
+            # a loaded machine left it behind, the recording ends where the run did. The
+            # faults are read first: the controllers' watchdog fires once the states stop.
+            executor.remove_node(robot)
+            take_what_is_queued(executor, recorder)
             ok = not any(faults.values())
             return RobotOutcome(path, ok, "ok" if ok else f"faults {faults}", _since(t0))
         except (KeyboardInterrupt, ExternalShutdownException) as exc:

@@ -147,11 +147,11 @@ def wait_for_resends(
 def take_what_is_queued(
     executor: Any, recorder: Any, quiet_s: float = 0.1, most_s: float = 1.0
 ) -> None:
-    """After an interruption, with the plant stopped: let the recorder take what is still
-    queued for it, until it has taken nothing for ``quiet_s`` (other callbacks, such as the
-    stopped plant's unmatched publishers, do not count), at most ``most_s``. A recorder that
-    lagged behind a fast lockstep run would otherwise lose the samples in flight, published
-    before the signal."""
+    """With the plant stopped (after an interruption, or at the end of a robot-mode run): let
+    the recorder take what is still queued for it, until it has taken nothing for ``quiet_s``
+    (other callbacks, such as the stopped plant's unmatched publishers, do not count), at most
+    ``most_s``. A recorder that lagged behind a fast lockstep run, or a loaded machine's
+    robot, would otherwise lose the samples in flight, published before the stop."""
     t0 = last = time.monotonic()
     taken = sum(recorder.counts.values())
     while (now := time.monotonic()) - last < quiet_s and now - t0 < most_s:
