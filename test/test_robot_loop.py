@@ -967,6 +967,46 @@ def test_a_driver_whose_period_does_not_divide_t_gets_the_period_that_would(
         assert warned[0].endswith(f"({advice})")
 
 
+@pytest.mark.parametrize(
+    ("driver_ms", "period_ms", "retimed_ms"),
+    [(8.0, 10.0, 8.0), (6.0, 10.0, 12.0), (4.0, 10.0, None), (10.0, 10.0, None)],
+)
+def test_period_from_driver_builds_the_loop_again_at_the_period_it_would_advise(
+    driver_ms, period_ms, retimed_ms
+):
+    """``period_from_driver``: at the first start, a driver whose period T should be a multiple
+    of gets a loop at that multiple instead of the warning; a faster driver (250 Hz) and one
+    that divides T keep T."""
+    run = run_robot_loop(
+        0.3, driver_ms=driver_ms, period_ms=period_ms, phase_ms=0.3, period_from_driver=True
+    )
+    assert "period_advice" not in run.counts
+    assert not [text for _, text in run.lines if "does not divide" in text]
+    if retimed_ms is None:
+        assert "period_from_driver" not in run.counts
+        assert run.period_ns == round(period_ms * 1e6)
+    else:
+        assert run.counts["period_from_driver"] == 1 and run.counts["starts"] == 1
+        assert run.period_ns == round(retimed_ms * 1e6)
+        assert run.counts["samples_taken"] >= 0.3e3 / retimed_ms - 4
+
+
+def test_a_125_hz_driver_at_its_own_period_holds_the_panda_its_velocity_published():
+    """On a 125 Hz driver under T = 10 ms a command meets a delay that changes from sample to
+    sample: the Panda with its velocity published is lost by the law alone (61.8 deg, simulated
+    time); ``period_from_driver`` samples at 8 ms and tracks its move within 0.5 deg, as
+    ``period: 0.008`` does (docs/robot.md, "When the arm applies a command")."""
+    kept = panda_100hz_move(2.5, driver_ms=8.0, phase_ms=2.96, velocity=True)
+    assert kept.max_tracking_error_deg() > 10.0
+    own = panda_100hz_move(2.5, driver_ms=8.0, phase_ms=2.96, velocity=True, period_ms=8.0)
+    auto = panda_100hz_move(
+        2.5, driver_ms=8.0, phase_ms=2.96, velocity=True, period_from_driver=True
+    )
+    assert auto.counts["period_from_driver"] == 1
+    assert auto.max_tracking_error_deg() < 0.5
+    assert auto.max_tracking_error_deg() == pytest.approx(own.max_tracking_error_deg(), abs=0.05)
+
+
 def _steps_of(loop, steps: list) -> None:
     """Record every step with a command and the plan's own set point of its sample."""
     on_joint_state = loop.on_joint_state

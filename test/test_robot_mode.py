@@ -82,8 +82,15 @@ class Driver(Node):
     driver's period): the waits start at the next tick.
     """
 
-    def __init__(self, context, rate_hz: float = 500.0, time_scale: float | None = None) -> None:
+    def __init__(
+        self,
+        context,
+        rate_hz: float = 500.0,
+        time_scale: float | None = None,
+        tick_ns: int = T_NS,
+    ) -> None:
         super().__init__("test_driver", context=context)
+        self.tick_ns = tick_ns  # robot_node's sampling period, at whose ticks it waits
         robot = load_robot(CONFIG_DIR / "puma560_3dof.urdf")
         self.dt = 1.0 / rate_hz
         # robot_sim's driver (RobotDriver) around apc's plant, 0.5 ms RK4 steps: names shuffled
@@ -140,7 +147,7 @@ class Driver(Node):
     def _on_sample(self, msg: JointState) -> None:
         stamp = wire.stamp_to_ns(msg.header.stamp)
         offset = self.sim_ns - stamp  # the smallest one seen is a sample that came at once
-        if self.tick_offset is None or stamp - (self._last_sample or 0) != T_NS:
+        if self.tick_offset is None or stamp - (self._last_sample or 0) != self.tick_ns:
             self.tick_offset = offset  # after a gap (a re-activation) ticks may have another phase
         self._last_sample = stamp
         self.tick_offset = min(self.tick_offset, offset)
@@ -191,7 +198,7 @@ class Driver(Node):
         msg.position = [float(v) for v in reading.position]
         self.pub.publish(msg)
         offset = self.tick_offset
-        if self._waits and offset is not None and (self.sim_ns - offset) % T_NS == 0:
+        if self._waits and offset is not None and (self.sim_ns - offset) % self.tick_ns == 0:
             self._wait = [self.sim_ns - offset, now, False, False]  # a tick falls here
 
     def q(self) -> np.ndarray:
@@ -475,6 +482,29 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
         assert np.max(np.abs(driver.q_deg() - GOAL_DEG)) > 20.0
     # (the abort's sample gets no command by design: one wait goes unanswered)
     report("robot mode, watchdog and abort: waits unanswered", wait_timeouts=driver.wait_timeouts)
+
+
+def test_a_125_hz_driver_gets_a_sampling_period_of_its_own_in_simulated_time(graph, tmp_path):
+    """The shipped file's T = 10 ms on a 125 Hz driver: robot_node samples at 8 ms from its
+    first start (``period_from_driver``), says so once, and holds the arm under the payload
+    it does not know."""
+    driver = graph.add(
+        Driver(graph.context, rate_hz=125.0, time_scale=TIME_SCALE, tick_ns=8_000_000)
+    )
+    observer = graph.add(rclpy.create_node("observer", context=graph.context))
+    diag = Diagnostics(observer, "/robot_node")
+    with _controllers(tmp_path, use_sim_time=True) as log_path:
+        graph.spin_until(lambda: driver.commands, 30, "the first command")
+        q_start, t_start = driver.q_deg(), time.monotonic()
+        _spin_sim(graph, driver, 0.5)
+        assert _max_deviation_deg(driver, t_start, q_start) < 0.5
+        graph.spin_until(lambda: "sampling_period_s" in diag.values, 10, "diagnostics")
+        assert diag.values["sampling_period_s"] == "0.008"
+        assert diag.count("period_from_driver") == 1 and diag.count("period_advice") == 0
+        assert float(diag.values["carry_max_us"]) == 0.0  # every sample a state as it is
+    text = log_path.read_text()
+    assert text.count("sampling at 0.008 s, the multiple of it nearest") == 1
+    assert "does not divide the sampling period" not in text  # the warning without it
 
 
 def test_bad_parameter_stops_autostart_with_one_line():

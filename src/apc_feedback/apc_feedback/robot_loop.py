@@ -53,10 +53,8 @@ Deactivation sends the model's gravity hold once and stops commanding (an inacti
 controller commands nothing: another one may take the joints over).
 
 The driver's rate. The driver applies a command at its next write, a driver period (plus the
-trip) after the state, which Eq. 16 does not model; a law that does (``AdaptiveFeedback`` with
-``input_lags``) is told the driver period at a start, or the delay the driver's effort shows
-(:class:`~apc_feedback.command_echo.CommandEcho`, :class:`~apc_feedback.delay_telling.
-DelayTelling`), and the samples' velocity as the states show it (docs/robot.md).
+trip) after the state, which Eq. 16 does not model; a law that does is told that delay at a
+start (:meth:`RobotLoop._start`), and the samples' velocity as the states show it.
 """
 
 from __future__ import annotations
@@ -93,11 +91,13 @@ STOP_TOLERANCE = 0.05
 class Step(NamedTuple):
     """What the node publishes after one call of :class:`RobotLoop`, each None where there is
     none: the command row (``command_joints`` order); for observers, the sample taken (stamped
-    ``kT``) and the plan's set point of that sample with the ``u_n`` sent."""
+    ``kT``) and the plan's set point of that sample with the ``u_n`` sent; ``retime``: the
+    sampling period (s) to build the loop again at, instead of starting (``period_from_driver``)."""
 
     command: np.ndarray | None = None
     sample: JointSample | None = None
     setpoint: Setpoint | None = None
+    retime: float | None = None
 
 
 NOTHING = Step()
@@ -137,6 +137,10 @@ class RobotLoop:
     feedforward_ahead : bool
         Send the nominal torque of the sample the law models the command acting over, whole
         samples after its own (:meth:`RobotSampler.samples_late`; docs/robot.md).
+    period_from_driver : bool
+        At the first start after activation, for a driver whose period T should be a multiple
+        of (:func:`~apc_feedback.robot_sampling.period_advice`), ``Step(retime=that multiple)``
+        instead of a start: the caller builds the loop again at it (else: a start, and a warning).
     """
 
     law: FeedbackLaw
@@ -152,6 +156,7 @@ class RobotLoop:
     stop_time: float = STOP_TIME_S
     command_first: bool = False
     feedforward_ahead: bool = True
+    period_from_driver: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stop_time < float("inf"):
@@ -219,6 +224,10 @@ class RobotLoop:
                 # command meets): it waits for the second state, which gives the period.
                 self.count("start_waits_for_driver_period")
                 return NOTHING
+            retime = period_advice(self.period_ns, sampler.driver_period_ns)
+            if self.period_from_driver and not self._replan and retime is not None:
+                self.count("period_from_driver")
+                return Step(retime=retime)
             self._start(take.k, sample)
         elif (moved := self.delay.moved(take.k)) or sampler.velocity_kind != self._velocity_kind:
             self._follow_driver(take.k, moved)
@@ -299,14 +308,11 @@ class RobotLoop:
 
         A law that models its input's delay (``AdaptiveFeedback`` with ``input_lags``) is told
         the delay it splits ``Ĝ(0)`` by at its next (re)start: the delay the driver's effort
-        shows (:class:`~apc_feedback.command_echo.CommandEcho`), else one driver period,
-        measured from the stamps, with two scored beside it. The command leaves in its state's
-        callback and the driver applies it at its next write (ros2_control's read, update,
-        write cycle), a drive that adds a cycle one later; what else the transport adds the
-        identified lags learn. It is told the samples' velocity's stencil too: robot mode's
-        estimate for a driver that sends none (the sampled velocity lags the arm's by what the
-        inputs did over the estimate's span, two driver periods), or the driver's backward
-        difference; a measured velocity has none.
+        shows (:class:`~apc_feedback.command_echo.CommandEcho`), else one driver period (the
+        driver applies a command at its next write: ros2_control's read, update, write cycle)
+        with two scored beside it (a drive that adds a cycle). It is told the samples'
+        velocity's stencil too: robot mode's estimate for a driver that sends none, or the
+        driver's backward difference; a measured velocity has none.
         """
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
         self._advise_period(k)
@@ -516,9 +522,7 @@ class RobotLoop:
             # The rejoin starts at this sample's measured state, so the law's first set point,
             # a sample on, is where the arm is then: anchored a sample later, at the state
             # itself, it trailed a moving arm by a sample's motion (1.3 deg on the paper's move
-            # through robot_sim). Before the planned input's change was weighed
-            # (q_input_change), the anchored start re-tripped the law on a 100 Hz driver with
-            # every command a period late (test_supervisor); with it, it holds.
+            # through robot_sim).
             if approach > 0.0 and self.plan.rejoin(k, args[1], args[2], approach):
                 self.count("supervisor.handbacks")
                 self.log(

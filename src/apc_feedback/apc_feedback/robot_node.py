@@ -13,7 +13,9 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
 - ``activate`` starts sampling in step with the driver: the first joint state locks the
   samples' phase to the driver's cycle, and sample k is taken in the callback of the driver's
   state for the time kT + phase (the nearest one, carried to that time when the driver's period
-  does not divide T), stamped kT. The feedforward's plan, inside this node
+  does not divide T), stamped kT; a driver whose period is over half of T and does not divide
+  it (125 Hz under 10 ms) has the loop built again at the first start with T the multiple of
+  its period nearest T (``period_from_driver``). The feedforward's plan, inside this node
   (:class:`apc_feedforward.goals.GoalQueue`, as joint_trajectory_controller samples its
   trajectory in ``update()``), gives set point k and the nominal torque ``u_n`` of the sample
   its command acts over (``feedforward_ahead``: ``u_n(k + m)`` when it acts m whole samples
@@ -132,6 +134,7 @@ class RobotDiagnostics(Diagnostics):
                 self.values[key] = f"{value:.1f}"
         if self.sampler is not None:
             self.values["velocity_kind"] = self.sampler.velocity_kind
+            self.values["sampling_period_s"] = f"{self.sampler.period_ns * 1e-9:.6g}"
         if self.echo is not None:
             delay = self.echo.delay_ns
             self.values["command_applied_ms"] = (
@@ -197,6 +200,14 @@ PARAMS: tuple[Param, ...] = (
         "adaptive law models its command acting (whole samples of its input delay later: a "
         "driver period of about T or more), not the sample's own",
     ),
+    Param(
+        "period_from_driver",
+        True,
+        "at the first start after activation, a driver whose period is over half of 'period' "
+        "and does not divide it (125 Hz under 0.01 s) sets the sampling period to the multiple "
+        "of its period nearest 'period' (logged; 'sampling_period_s' on /diagnostics); false: "
+        "'period' stays, with a warning",
+    ),
     *params_from(SupervisorConfig, "supervisor."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
 )
@@ -247,50 +258,15 @@ class RobotNode(LifecycleNode):
 
     def _configure(self) -> None:
         values = self._declared
-        robot = controller_robot_from_params(values)
+        robot = self._robot = controller_robot_from_params(values)
         n = robot.n_joints
-        law = LawParameters(values, robot).law
-        try:
-            sampling = RobotSamplingConfig(
-                period=values["period"],
-                **{
-                    f: values[f]
-                    for f in ("max_age", "watchdog", "velocity_window", "short_difference")
-                },
-            )
-        except RobotSamplingError as exc:
-            raise ConfigError(f"parameter '{exc.field}': {exc}") from None
         command_joints = values["command_joints"] or list(robot.joint_names)
-        diag = self.diagnostics
-        try:
-            command = CommandMap(robot.joint_names, command_joints, robot.effort_limit, diag.count)
-        except ValueError as exc:
-            raise ConfigError(f"parameter 'command_joints': {exc}") from None
         topic = values["command_topic"]
         if not topic.startswith("/"):
             raise ConfigError(f"parameter 'command_topic': must be absolute, got {topic!r}")
-        model = robot.model
-        data = model.createData()
         self.joint_names = robot.joint_names
-        path_tolerance = _per_joint("path_tolerance", values["path_tolerance"], n)
-        supervision = self._supervision(values, robot)
-        self.loop = RobotLoop(
-            law=law,
-            sampling=sampling,
-            command=command,
-            plan=GoalQueue.from_params(robot, values),
-            gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
-            path_tolerance=path_tolerance,
-            stop_time=values["stop_time"],
-            command_first=values["command_first"],
-            feedforward_ahead=values["feedforward_ahead"],
-            count=diag.count,
-            log=level_logger(self),
-            **supervision,
-        )
-        diag.timing, diag.law = self.loop.timing, self.loop.law
-        diag.sampler, diag.echo = self.loop.sampler, self.loop.echo
-        self._period_ns = wire.seconds_to_ns(values["period"])
+        self.loop = self._build_loop(values["period"])
+        diag = self.diagnostics
         self._sample_msg = JointState()
         self._setpoint_msg = JointTrajectory()
         self._command_msg = Float64MultiArray()
@@ -320,6 +296,77 @@ class RobotNode(LifecycleNode):
         self.get_logger().info(
             f"configured: {n} joints, T = {values['period']} s, command on '{topic}' in "
             f"order {list(command_joints)}"
+        )
+
+    def _build_loop(self, period: float) -> RobotLoop:
+        """Robot mode's loop at the sampling period ``period`` (s), from the parameters (a
+        ConfigError names a bad one); the diagnostics report on it."""
+        values, robot, diag = {**self._declared, "period": period}, self._robot, self.diagnostics
+        law = LawParameters(values, robot).law
+        try:
+            sampling = RobotSamplingConfig(
+                period=period,
+                **{
+                    f: values[f]
+                    for f in ("max_age", "watchdog", "velocity_window", "short_difference")
+                },
+            )
+        except RobotSamplingError as exc:
+            raise ConfigError(f"parameter '{exc.field}': {exc}") from None
+        command_joints = values["command_joints"] or list(robot.joint_names)
+        try:
+            command = CommandMap(robot.joint_names, command_joints, robot.effort_limit, diag.count)
+        except ValueError as exc:
+            raise ConfigError(f"parameter 'command_joints': {exc}") from None
+        model = robot.model
+        data = model.createData()
+        loop = RobotLoop(
+            law=law,
+            sampling=sampling,
+            command=command,
+            plan=GoalQueue.from_params(robot, values),
+            gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
+            path_tolerance=_per_joint("path_tolerance", values["path_tolerance"], robot.n_joints),
+            stop_time=values["stop_time"],
+            command_first=values["command_first"],
+            feedforward_ahead=values["feedforward_ahead"],
+            period_from_driver=values["period_from_driver"],
+            count=diag.count,
+            log=level_logger(self),
+            **self._supervision(values, robot),
+        )
+        diag.timing, diag.law = loop.timing, loop.law
+        diag.sampler, diag.echo = loop.sampler, loop.echo
+        self._period_ns = wire.seconds_to_ns(period)
+        return loop
+
+    def _retime(self, period: float) -> None:
+        """The loop asked, at its first start, for a sampling period that is a multiple of the
+        driver's (``period_from_driver``): build it again at ``period`` and activate it, with
+        the goals that came since activation; the next states start it."""
+        old = self.loop
+        assert old is not None
+        driver_ms = old.sampler.driver_period_ns * 1e-6
+        try:
+            loop = self._build_loop(period)
+        except ValueError as exc:  # keep T: the old loop starts at the next state, and warns
+            old.period_from_driver = False
+            self.get_logger().error(f"sampling at {period:.6g} s: {exc}; keeping 'period'")
+            return
+        goals = list(old.plan.queued)
+        self.loop = loop
+        loop.activate()
+        for goal in goals:
+            loop.add_goal(goal)
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        self._timer = self.create_timer(
+            period, guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog)
+        )
+        self.get_logger().warn(
+            f"the driver's period {driver_ms:.3g} ms does not divide 'period' "
+            f"{old.sampling.period:g} s: sampling at {period:.6g} s, the multiple of it nearest "
+            "(period_from_driver; false keeps 'period')"
         )
 
     @staticmethod
@@ -428,6 +475,9 @@ class RobotNode(LifecycleNode):
         except StateRejectedError as exc:
             self.diagnostics.count(exc.reason)
             reject(self, self.diagnostics, wire.JOINT_STATES, exc)
+            return
+        if step.retime is not None:
+            self._retime(step.retime)
             return
         if step.sample is not None:  # the law's time: most states are no sample
             self.diagnostics.time("compute", time.perf_counter() - started)

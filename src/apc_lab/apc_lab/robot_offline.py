@@ -177,6 +177,7 @@ def run_robot_loop(
     missed_seed: int = 0,
     command_first: bool = False,
     feedforward_ahead: bool = True,
+    period_from_driver: bool = False,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -240,6 +241,9 @@ def run_robot_loop(
     feedforward_ahead : bool
         Robot mode's ``feedforward_ahead`` (on, as robot mode's default): the nominal torque of
         the sample over which the law models the command acting.
+    period_from_driver : bool
+        Robot mode's ``period_from_driver``: where the loop asks for another T at its first
+        start, it is built again at that T (``setup`` called again), as ``robot_node`` does.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -285,29 +289,34 @@ def run_robot_loop(
     data = controller.model.createData()
     counts: Counter = Counter()
     lines: list[tuple[str, str]] = []
-    config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
-    tolerance = np.full(n, 0.2)
-    supervision = {}
-    if supervisor is not None and supervisor.enable:
-        supervision = {
-            "supervisor": Supervisor(supervisor, n, T),
-            "fallback": fallback_law(supervisor, controller, T),
-        }
-    loop = RobotLoop(
-        law=AdaptiveFeedback(controller.model, config),
-        sampling=RobotSamplingConfig(period=T),
-        command=CommandMap(robot.joint_names, command_joints, robot.effort_limit),
-        plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
-        gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
-        path_tolerance=tolerance,
-        command_first=command_first,
-        feedforward_ahead=feedforward_ahead,
-        count=lambda name: counts.update((name,)),
-        log=lambda level, text: lines.append((level, text)),
-        **supervision,
-    )
-    if setup is not None:
-        setup(loop)
+
+    def build(T: float) -> RobotLoop:
+        config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
+        supervision = {}
+        if supervisor is not None and supervisor.enable:
+            supervision = {
+                "supervisor": Supervisor(supervisor, n, T),
+                "fallback": fallback_law(supervisor, controller, T),
+            }
+        loop = RobotLoop(
+            law=AdaptiveFeedback(controller.model, config),
+            sampling=RobotSamplingConfig(period=T),
+            command=CommandMap(robot.joint_names, command_joints, robot.effort_limit),
+            plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
+            gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
+            path_tolerance=np.full(n, 0.2),
+            command_first=command_first,
+            feedforward_ahead=feedforward_ahead,
+            period_from_driver=period_from_driver,
+            count=lambda name: counts.update((name,)),
+            log=lambda level, text: lines.append((level, text)),
+            **supervision,
+        )
+        if setup is not None:
+            setup(loop)
+        return loop
+
+    loop = build(T)
     latency = latency or Latency()
     draws = np.random.default_rng(missed_seed)
     transport = round(transport_ms * MS)
@@ -318,7 +327,11 @@ def run_robot_loop(
     move_end_ns: int | None = None
 
     def handle(step: Step, now: int) -> None:
-        nonlocal moved, move_end_ns
+        nonlocal moved, move_end_ns, loop
+        if step.retime is not None:  # robot_node builds its loop again at that T
+            loop = build(step.retime)
+            loop.activate()
+            return
         if step.command is not None:
             # It reaches the driver after its latency; the driver applies the newest arrival at
             # its first cycle after that (a cycle at the same instant has already run).
@@ -333,8 +346,8 @@ def run_robot_loop(
             assert goal_deg is not None
             start = step.setpoint.q
             move = FourThreeFour(start, np.deg2rad(goal_deg), (0.2, 0.6, 0.2))
-            plan.set_trajectory(move, step.setpoint.k + round(hold_s / T))
-            move_end_ns = plan.end_k() * T_NS
+            plan.set_trajectory(move, step.setpoint.k + round(hold_s / (loop.period_ns * 1e-9)))
+            move_end_ns = plan.end_k() * loop.period_ns
             moved = True
 
     # Events on the one clock: (time, kind, order of scheduling, payload). At equal times a
@@ -380,7 +393,7 @@ def run_robot_loop(
             if not loop.active:
                 loop.activate()
             handle(loop.tick(now), now)
-            heapq.heappush(events, (now + T_NS, WATCHDOG, next(order), None))
+            heapq.heappush(events, (now + loop.period_ns, WATCHDOG, next(order), None))
     return RobotRun(
-        q0, log, loop.timing.figures(), counts, lines, commands, t_act, T_NS, move_end_ns
+        q0, log, loop.timing.figures(), counts, lines, commands, t_act, loop.period_ns, move_end_ns
     )
