@@ -17,7 +17,7 @@ from apc_feedback.command_map import CommandMap
 from apc_feedback.joint_velocity import DIFFERENCE_STATES
 from apc_feedback.linearize import VelocityStencil
 from apc_feedback.robot_loop import NOTHING, STOP_TIME_S, RobotLoop
-from apc_feedback.robot_sampling import RobotSamplingConfig
+from apc_feedback.robot_sampling import RobotSamplingConfig, nominal_period_ns
 from apc_feedforward.nominal import Setpoint
 from apc_lab.robot_offline import Latency, run_robot_loop
 from apc_lab.scenario import recommended_settings
@@ -989,6 +989,53 @@ def test_period_from_driver_builds_the_loop_again_at_the_period_it_would_advise(
         assert run.counts["period_from_driver"] == 1 and run.counts["starts"] == 1
         assert run.period_ns == round(retimed_ms * 1e6)
         assert run.counts["samples_taken"] >= 0.3e3 / retimed_ms - 4
+
+
+def _first_steps(loop, stamps):
+    """Each state's step, the state arriving 0.3 ms after its stamp."""
+    return [loop.on_joint_state(_state(t, 0.0), t + 300_000) for t in stamps]
+
+
+def test_period_from_driver_judges_a_jittering_driver_once_on_a_few_intervals():
+    """A 125 Hz driver whose stamps jitter by up to 50 us, activated before its first state
+    (autostart): the loop waits for five intervals, then asks once for T = 8 ms exactly (the
+    driver's period as a whole number of hertz gives it), not the median's 7.96-8.04 ms."""
+    jitter = np.random.default_rng(0).uniform(-50_000, 50_000, 12).round().astype(int)
+    stamps = [100 * T + 3 * MS + i * 8 * MS + int(j) for i, j in enumerate(jitter)]
+    loop, counts, _ = _loop(before=None)
+    loop.period_from_driver = True
+    loop.activate()
+    steps = _first_steps(loop, stamps[:6])
+    assert [step.retime for step in steps] == [None] * 5 + [0.008]
+    assert counts["period_from_driver"] == 1 and "starts" not in counts
+    assert counts["start_waits_for_driver_period"] == 4  # states 2-5: one to four intervals
+
+
+def test_period_from_driver_does_not_take_a_lost_state_for_a_slow_driver():
+    """A 100 Hz driver whose second state is lost: its first interval, 20 ms, would ask for
+    T = 20 ms; the loop waits for more and starts at T."""
+    stamps = [100 * T + 3 * MS] + [100 * T + 3 * MS + i * T for i in range(2, 10)]
+    loop, counts, _ = _loop(before=None)
+    loop.period_from_driver = True
+    loop.activate()
+    steps = _first_steps(loop, stamps)
+    assert all(step.retime is None for step in steps)
+    assert "period_from_driver" not in counts and counts["starts"] == 1
+    assert loop.period_ns == T
+
+
+@pytest.mark.parametrize(
+    ("median_ns", "nominal_ns"),
+    [(8_004_800, 8_000_000), (7_987_337, 8_000_000), (8_338_100, 8_333_333),
+     (6_000_000, 6_000_000), (6_010_000, 6_000_000), (10_000_000, 10_000_000),
+     (7_000_000_000, 7_000_000_000)],
+)  # fmt: skip
+def test_a_drivers_period_is_taken_as_a_whole_number_of_hertz_where_that_is_close(
+    median_ns, nominal_ns
+):
+    """A median of jittering stamps (125 Hz, 120 Hz) is the whole-hertz period near it; a
+    simulator's 6 ms (166.7 Hz) stays."""
+    assert nominal_period_ns(median_ns) == nominal_ns
 
 
 def test_a_125_hz_driver_at_its_own_period_holds_the_panda_its_velocity_published():

@@ -486,8 +486,8 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
 
 def test_a_125_hz_driver_gets_a_sampling_period_of_its_own_in_simulated_time(graph, tmp_path):
     """The shipped file's T = 10 ms on a 125 Hz driver: robot_node samples at 8 ms from its
-    first start (``period_from_driver``), says so once, and holds the arm under the payload
-    it does not know."""
+    first start (``period_from_driver``), says so once an activation, and holds the arm under
+    the payload it does not know."""
     driver = graph.add(
         Driver(graph.context, rate_hz=125.0, time_scale=TIME_SCALE, tick_ns=8_000_000)
     )
@@ -498,12 +498,22 @@ def test_a_125_hz_driver_gets_a_sampling_period_of_its_own_in_simulated_time(gra
         q_start, t_start = driver.q_deg(), time.monotonic()
         _spin_sim(graph, driver, 0.5)
         assert _max_deviation_deg(driver, t_start, q_start) < 0.5
-        graph.spin_until(lambda: "sampling_period_s" in diag.values, 10, "diagnostics")
-        assert diag.values["sampling_period_s"] == "0.008"
+        graph.spin_until(
+            lambda: diag.values.get("sampling_period_s") == "0.008", 10, "T = 8 ms on /diagnostics"
+        )
         assert diag.count("period_from_driver") == 1 and diag.count("period_advice") == 0
         assert float(diag.values["carry_max_us"]) == 0.0  # every sample a state as it is
+        # each activation judges the driver afresh, from the configured period
+        assert _change(graph, observer, Transition.TRANSITION_DEACTIVATE)
+        driver.stop_waiting()
+        assert _change(graph, observer, Transition.TRANSITION_ACTIVATE)
+        graph.spin_until(lambda: diag.count("period_from_driver") == 2, 10, "a second retime")
+        n = len(driver.commands)
+        _spin_sim(graph, driver, 0.2)
+        assert len(driver.commands) > n + 10
+        assert diag.values["sampling_period_s"] == "0.008" and diag.count("watchdog") == 0
     text = log_path.read_text()
-    assert text.count("sampling at 0.008 s, the multiple of it nearest") == 1
+    assert text.count("sampling at 0.008 s, the multiple of it nearest") == 2
     assert "does not divide the sampling period" not in text  # the warning without it
 
 

@@ -71,7 +71,13 @@ from apc_feedback.command_map import CommandMap
 from apc_feedback.delay_telling import DelayTelling
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
-from apc_feedback.robot_sampling import RobotSampler, RobotSamplingConfig, period_advice
+from apc_feedback.robot_sampling import (
+    RETIME_INTERVALS,
+    RobotSampler,
+    RobotSamplingConfig,
+    period_advice,
+    period_warning,
+)
 from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
@@ -175,7 +181,7 @@ class RobotLoop:
         self.period_ns = self.sampler.period_ns
         self.active = False
         self.faulted = False  # watchdog: silent until a fresh state
-        self._restart = False  # the next sample taken is a start
+        self._restart = self._first_start = False  # the next sample is a start; the first one
         self._replan = False  # and drops the plan (a fault, an abort; activation drops it then)
         self._sent: tuple[int, np.ndarray] | None = None  # (k, total torque, model order)
         self.command_state_ns: int | None = None  # driver stamp of the newest law command's
@@ -225,7 +231,10 @@ class RobotLoop:
                 self.count("start_waits_for_driver_period")
                 return NOTHING
             retime = period_advice(self.period_ns, sampler.driver_period_ns)
-            if self.period_from_driver and not self._replan and retime is not None:
+            if self.period_from_driver and self._first_start and retime is not None:
+                if sampler.intervals_seen < RETIME_INTERVALS:  # judged on a few more
+                    self.count("start_waits_for_driver_period")
+                    return NOTHING
                 self.count("period_from_driver")
                 return Step(retime=retime)
             self._start(take.k, sample)
@@ -261,6 +270,7 @@ class RobotLoop:
         first sample."""
         self.sampler.start()
         self.active, self.faulted, self._restart, self._replan = True, False, True, False
+        self._first_start = True  # the one period_from_driver judges the driver at
         self._drop_plan(None)
         self.hold.reset()
 
@@ -325,7 +335,7 @@ class RobotLoop:
             self._drop_plan(k)
             if self.stop_time > 0.0:
                 self._stop(k, sample)
-        self._restart = self._replan = False
+        self._restart = self._replan = self._first_start = False
         self.count("starts")
 
     def _advise_period(self, k: int) -> None:
@@ -335,17 +345,9 @@ class RobotLoop:
         if driver_ns == self._advised_driver_ns:
             return
         self._advised_driver_ns = driver_ns
-        if (multiple := period_advice(self.period_ns, driver_ns)) is None:
-            return
-        self.count("period_advice")
-        self.log(
-            "warn",
-            f"sample {k}: the driver's period {driver_ns * 1e-6:.3g} ms does not divide the "
-            f"sampling period {self.period_ns * 1e-6:.3g} ms: its states are carried to the "
-            "sample times and a command's delay changes from sample to sample, which the "
-            f"adaptive law does not model; set 'period' to a multiple of the driver's "
-            f"({multiple:.4g} s)",
-        )
+        if (warning := period_warning(self.period_ns, driver_ns)) is not None:
+            self.count("period_advice")
+            self.log("warn", f"sample {k}: {warning}")
 
     def _stop(self, k: int, sample: JointSample) -> None:
         """Bring the arm to rest from the ``sample``'s state, from sample ``k`` on."""
@@ -504,9 +506,7 @@ class RobotLoop:
         plan, hold or motion, rejoined from the measured state (``approach_time``): asked to
         remove the fallback's sag under an unknown payload at once, the law on a 100 Hz driver
         asked for 135-380 N m within two samples and re-tripped within five, at every
-        hand-back. Identifying from the fallback's hold instead (its applied torques)
-        made the law re-trip within a few samples of every hand-back
-        (``apc_lab.robot_offline``, G forced wrong on a clean hold).
+        hand-back (docs/robot.md has that and what else was tried).
         """
         supervisor, k = self.supervisor, args[0]
         error, error_qd = args[1] - args[3], args[2] - args[4]

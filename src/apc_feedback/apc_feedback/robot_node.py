@@ -298,9 +298,10 @@ class RobotNode(LifecycleNode):
             f"order {list(command_joints)}"
         )
 
-    def _build_loop(self, period: float) -> RobotLoop:
+    def _build_loop(self, period: float, from_driver: bool = True) -> RobotLoop:
         """Robot mode's loop at the sampling period ``period`` (s), from the parameters (a
-        ConfigError names a bad one); the diagnostics report on it."""
+        ConfigError names a bad one), judging the driver's period at its first start if
+        ``from_driver`` and ``period_from_driver``; the diagnostics report on it."""
         values, robot, diag = {**self._declared, "period": period}, self._robot, self.diagnostics
         law = LawParameters(values, robot).law
         try:
@@ -330,7 +331,7 @@ class RobotNode(LifecycleNode):
             stop_time=values["stop_time"],
             command_first=values["command_first"],
             feedforward_ahead=values["feedforward_ahead"],
-            period_from_driver=values["period_from_driver"],
+            period_from_driver=from_driver and values["period_from_driver"],
             count=diag.count,
             log=level_logger(self),
             **self._supervision(values, robot),
@@ -342,27 +343,25 @@ class RobotNode(LifecycleNode):
 
     def _retime(self, period: float) -> None:
         """The loop asked, at its first start, for a sampling period that is a multiple of the
-        driver's (``period_from_driver``): build it again at ``period`` and activate it, with
-        the goals that came since activation; the next states start it."""
+        driver's (``period_from_driver``): build it again at ``period``, once an activation,
+        and activate it with the goals accepted since activation; the next states start it."""
         old = self.loop
         assert old is not None
         driver_ms = old.sampler.driver_period_ns * 1e-6
         try:
-            loop = self._build_loop(period)
+            loop = self._build_loop(period, from_driver=False)
         except ValueError as exc:  # keep T: the old loop starts at the next state, and warns
             old.period_from_driver = False
             self.get_logger().error(f"sampling at {period:.6g} s: {exc}; keeping 'period'")
             return
-        goals = list(old.plan.queued)
         self.loop = loop
-        loop.activate()
-        for goal in goals:
-            loop.add_goal(goal)
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._timer = self.create_timer(
             period, guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog)
         )
+        loop.activate()
+        loop.plan.queued.extend(old.plan.queued)  # accepted (and counted) once
         self.get_logger().warn(
             f"the driver's period {driver_ms:.3g} ms does not divide 'period' "
             f"{old.sampling.period:g} s: sampling at {period:.6g} s, the multiple of it nearest "
@@ -391,6 +390,8 @@ class RobotNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.loop is not None
+        if self.loop.sampling.period != self._declared["period"]:  # retimed last activation
+            self.loop = self._build_loop(self._declared["period"])  # judged afresh
         self.loop.activate()
         self._timer = self.create_timer(
             self.loop.sampling.period,
@@ -465,8 +466,8 @@ class RobotNode(LifecycleNode):
             except wire.WireError as exc:
                 reject(self, self.diagnostics, wire.JOINT_STATES, exc)
         newest_ns = samples[-1].stamp_ns if samples else None
-        for i, sample in enumerate(samples):
-            self._on_sample(loop, sample, newest_ns if i + 1 < len(samples) else None)
+        for i, sample in enumerate(samples):  # self.loop: a retime replaces it
+            self._on_sample(self.loop, sample, newest_ns if i + 1 < len(samples) else None)
 
     def _on_sample(self, loop: RobotLoop, sample: JointSample, newest_ns: int | None) -> None:
         started = time.perf_counter()

@@ -153,6 +153,9 @@ class Take(NamedTuple):
 
 #: Stamp intervals the driver's period is the median of: robust to a lost state or a late cycle.
 PERIOD_INTERVALS = 15
+#: Stamp intervals in hand before the sampling period is chosen from the driver's
+#: (``period_from_driver``): a median of one or two is a lost state's double period, or jitter.
+RETIME_INTERVALS = 5
 
 
 class RobotSampler:
@@ -301,6 +304,11 @@ class RobotSampler:
         return self.velocity_kind == "driver" and self.difference.refuted
 
     @property
+    def intervals_seen(self) -> int:
+        """The stamp intervals the driver's period is the median of (at most 15)."""
+        return len(self._intervals)
+
+    @property
     def velocity_kind(self) -> str:
         """What the samples' velocity is: ``estimated`` (from positions), ``difference`` (the
         driver's backward difference of its positions), ``sample_estimate`` (estimated from
@@ -434,7 +442,32 @@ def period_advice(period_ns: int, driver_ns: int) -> float | None:
     arm applies a command"). Faster drivers (250 Hz: T is 2.5 of their periods) track better
     at T = 10 ms than at a multiple of their period.
     """
+    driver_ns = nominal_period_ns(driver_ns)
     ratio = period_ns / driver_ns
     if ratio >= 2.0 or abs(ratio - round(ratio)) < 0.02:
         return None
     return max(1, round(ratio)) * driver_ns * 1e-9
+
+
+def nominal_period_ns(driver_ns: int) -> int:
+    """The driver's period as a whole number of hertz (ros2_control's ``update_rate`` is one)
+    or of tenths of a millisecond (a simulator's step) gives it, whichever is nearer the
+    measured median ``driver_ns``, where that is within 1 % of it; else the median. Stamps
+    taken at each update's time jitter by tens of microseconds, and a sampling period as far
+    off the driver's drifts across its cycles."""
+    hertz = max(1, round(1e9 / driver_ns))
+    nominal = min((round(1e9 / hertz), round(driver_ns, -5)), key=lambda c: abs(c - driver_ns))
+    return nominal if abs(nominal - driver_ns) <= 0.01 * driver_ns else driver_ns
+
+
+def period_warning(period_ns: int, driver_ns: int) -> str | None:
+    """What robot mode says of a driver whose period ``T`` should be a multiple of
+    (:func:`period_advice`), naming that multiple; None for any other driver."""
+    if (multiple := period_advice(period_ns, driver_ns)) is None:
+        return None
+    return (
+        f"the driver's period {driver_ns * 1e-6:.3g} ms does not divide the sampling period "
+        f"{period_ns * 1e-6:.3g} ms: its states are carried to the sample times and a "
+        "command's delay changes from sample to sample, which the adaptive law does not "
+        f"model; set 'period' to a multiple of the driver's ({multiple:.4g} s)"
+    )

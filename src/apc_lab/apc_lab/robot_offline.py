@@ -290,7 +290,7 @@ def run_robot_loop(
     counts: Counter = Counter()
     lines: list[tuple[str, str]] = []
 
-    def build(T: float) -> RobotLoop:
+    def build(T: float, from_driver: bool) -> RobotLoop:
         config = AdaptiveConfig.from_dict(dict(settings or recommended_settings(), period=T))
         supervision = {}
         if supervisor is not None and supervisor.enable:
@@ -307,7 +307,7 @@ def run_robot_loop(
             path_tolerance=np.full(n, 0.2),
             command_first=command_first,
             feedforward_ahead=feedforward_ahead,
-            period_from_driver=period_from_driver,
+            period_from_driver=from_driver,
             count=lambda name: counts.update((name,)),
             log=lambda level, text: lines.append((level, text)),
             **supervision,
@@ -316,7 +316,7 @@ def run_robot_loop(
             setup(loop)
         return loop
 
-    loop = build(T)
+    loop = build(T, period_from_driver)
     latency = latency or Latency()
     draws = np.random.default_rng(missed_seed)
     transport = round(transport_ms * MS)
@@ -328,8 +328,8 @@ def run_robot_loop(
 
     def handle(step: Step, now: int) -> None:
         nonlocal moved, move_end_ns, loop
-        if step.retime is not None:  # robot_node builds its loop again at that T
-            loop = build(step.retime)
+        if step.retime is not None:  # robot_node builds its loop again at that T, once
+            loop = build(step.retime, False)
             loop.activate()
             return
         if step.command is not None:
