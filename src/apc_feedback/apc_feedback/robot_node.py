@@ -259,8 +259,6 @@ class RobotNode(LifecycleNode):
     def _configure(self) -> None:
         values = self._declared
         robot = self._robot = controller_robot_from_params(values)
-        n = robot.n_joints
-        command_joints = values["command_joints"] or list(robot.joint_names)
         topic = values["command_topic"]
         if not topic.startswith("/"):
             raise ConfigError(f"parameter 'command_topic': must be absolute, got {topic!r}")
@@ -294,8 +292,8 @@ class RobotNode(LifecycleNode):
         )
         self._entities = [self.command_pub, self.sample_pub, self.setpoint_pub, states, goals]
         self.get_logger().info(
-            f"configured: {n} joints, T = {values['period']} s, command on '{topic}' in "
-            f"order {list(command_joints)}"
+            f"configured: {robot.n_joints} joints, T = {values['period']} s, command on "
+            f"'{topic}' in order {list(self.loop.command.joints)}"
         )
 
     def _build_loop(self, period: float, from_driver: bool = True) -> RobotLoop:
@@ -355,11 +353,7 @@ class RobotNode(LifecycleNode):
             self.get_logger().error(f"sampling at {period:.6g} s: {exc}; keeping 'period'")
             return
         self.loop = loop
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-        self._timer = self.create_timer(
-            period, guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog)
-        )
+        self._watch()
         loop.activate()
         loop.plan.queued.extend(old.plan.queued)  # accepted (and counted) once
         self.get_logger().warn(
@@ -393,13 +387,20 @@ class RobotNode(LifecycleNode):
         if self.loop.sampling.period != self._declared["period"]:  # retimed last activation
             self.loop = self._build_loop(self._declared["period"])  # judged afresh
         self.loop.activate()
+        self._watch()
+        self.diagnostics.message = "active"
+        self.get_logger().info("active: holding the measured position until a goal arrives")
+        return super().on_activate(state)
+
+    def _watch(self) -> None:
+        """The watchdog's timer at the loop's sampling period (one before it destroyed)."""
+        assert self.loop is not None
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
         self._timer = self.create_timer(
             self.loop.sampling.period,
             guarded(self, self.diagnostics, "watchdog_check", self._on_watchdog),
         )
-        self.diagnostics.message = "active"
-        self.get_logger().info("active: holding the measured position until a goal arrives")
-        return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._stop("inactive")
