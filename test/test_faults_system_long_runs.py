@@ -85,17 +85,19 @@ def test_long_run_stays_bounded():
 
 
 @pytest.mark.slow
-def test_a_quarter_hour_with_the_recommended_preset_stays_bounded():
-    """A quarter of an hour of simulated time (90,000 samples) of moves, holds up to 20 s and
-    payload changes (0-5 lb, picked up at the start of moves), offline, with the recommended
-    preset: every sample finite, trace(P) never above trace(P(0)), no refused RLS update,
-    tracking error bounded. The whole hour takes 2-4 minutes, too long for the suite:
+def test_five_minutes_with_the_recommended_preset_stays_bounded():
+    """Five minutes of simulated time (30,000 samples) of moves, holds up to 20 s and payload
+    changes (0-5 lb, picked up at the start of moves), offline, with the recommended preset:
+    every sample finite, trace(P) never above trace(P(0)), no refused RLS update, tracking
+    error bounded. The schedule repeats every 18 moves (six holds against three payloads held
+    for three moves each, about 105 s), so five minutes run every hold with every payload
+    almost three times. The whole hour takes 2-4 minutes, too long for the suite:
     ``bench/long_run.py --config recommended`` runs it (measured: 618 moves, 205 payload steps,
     worst 0.30 deg during a move, 0.06 deg holding).
     """
-    r = run_long(CONFIGS["recommended"], 900.0, segment_s=300.0)
+    r = run_long(CONFIGS["recommended"], 300.0, segment_s=100.0)
     report(
-        "a quarter hour, recommended",
+        "five minutes, recommended",
         wall_s=r["wall_s"],
         moves=r["moves"],
         payload_changes=r["payload_changes"],
@@ -103,8 +105,8 @@ def test_a_quarter_hour_with_the_recommended_preset_stays_bounded():
         rejected=r["rejected_updates"],
         max_error_deg=r["max_error_deg"],
     )
-    assert r["samples"] == 90_001
-    assert r["moves"] >= 150 and r["payload_changes"] >= 50
+    assert r["samples"] == 30_001
+    assert r["moves"] >= 50 and r["payload_changes"] >= 15
     assert r["finite"] and r["diverged_at_s"] is None
     assert r["max_trace_p"] <= r["trace_p0"] * (1 + 1e-9)
     assert r["rejected_updates"] == 0
