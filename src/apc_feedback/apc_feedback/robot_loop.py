@@ -61,7 +61,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -71,13 +70,15 @@ from apc_feedback.command_map import CommandMap
 from apc_feedback.delay_telling import DelayTelling
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedback.hold_torque import HoldTorque
+from apc_feedback.payload_estimate import PayloadCarry
 from apc_feedback.robot_sampling import (
     RETIME_INTERVALS,
+    PeriodAdvice,
     RobotSampler,
     RobotSamplingConfig,
     period_advice,
-    period_warning,
 )
+from apc_feedback.robot_step import NOTHING, Step
 from apc_feedback.sample_timing import SampleTiming
 from apc_feedback.supervisor import ADAPTIVE, FALLBACK, Supervisor, fallback_gains
 from apc_feedforward.goals import GoalQueue, accept_goal, report_sampled
@@ -92,21 +93,6 @@ STOP_TIME_S = 0.2
 #: limits, or spinning faster than the stop assumed) is not pulled back to where it could not
 #: stop; held to the first stop, the physical Panda was lost after 5 of 9 stalls of 0.3 s.
 STOP_TOLERANCE = 0.05
-
-
-class Step(NamedTuple):
-    """What the node publishes after one call of :class:`RobotLoop`, each None where there is
-    none: the command row (``command_joints`` order); for observers, the sample taken (stamped
-    ``kT``) and the plan's set point of that sample with the ``u_n`` sent; ``retime``: the
-    sampling period (s) to build the loop again at, instead of starting (``period_from_driver``)."""
-
-    command: np.ndarray | None = None
-    sample: JointSample | None = None
-    setpoint: Setpoint | None = None
-    retime: float | None = None
-
-
-NOTHING = Step()
 
 
 @dataclass
@@ -147,6 +133,9 @@ class RobotLoop:
         At the first start after activation, for a driver whose period T should be a multiple
         of (:func:`~apc_feedback.robot_sampling.period_advice`), ``Step(retime=that multiple)``
         instead of a start: the caller builds the loop again at it (else: a start, and a warning).
+    payload : PayloadCarry, optional
+        Estimates the payload at the first still hold of an activation and carries it in the
+        plan's model and ``gravity`` (counted: ``payload_carried``); None: the model stays.
     """
 
     law: FeedbackLaw
@@ -163,6 +152,7 @@ class RobotLoop:
     command_first: bool = False
     feedforward_ahead: bool = True
     period_from_driver: bool = False
+    payload: PayloadCarry | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stop_time < float("inf"):
@@ -176,9 +166,9 @@ class RobotLoop:
         if self._settle is not None:
             self.law.defer_learning = True
         self._split_delay = getattr(self.law, "split_delay", None)
-        self._advised_driver_ns = 0  # the driver period _advise_period last judged
         self.sampler = RobotSampler(self.sampling)
         self.period_ns = self.sampler.period_ns
+        self._advice = PeriodAdvice(self.period_ns)
         self.active = False
         self.faulted = False  # watchdog: silent until a fresh state
         self._restart = self._first_start = False  # the next sample is a start; the first one
@@ -273,6 +263,8 @@ class RobotLoop:
         self._first_start = True  # the one period_from_driver judges the driver at
         self._drop_plan(None)
         self.hold.reset()
+        if self.payload is not None:
+            self.payload.start()
 
     def deactivate(self) -> np.ndarray | None:
         """Stop; the last command (gravity hold at the newest position), None without one."""
@@ -325,7 +317,9 @@ class RobotLoop:
         driver's backward difference; a measured velocity has none.
         """
         driver_period = self.sampler.driver_period_ns * 1e-9  # known: a start waits for it
-        self._advise_period(k)
+        if (warning := self._advice.warning(self.sampler.driver_period_ns)) is not None:
+            self.count("period_advice")
+            self.log("warn", f"sample {k}: {warning}")
         self._tell_law()
         if self.supervisor is not None and self.fallback is not None:
             if self.fallback.kind == "computed_torque":
@@ -337,17 +331,6 @@ class RobotLoop:
                 self._stop(k, sample)
         self._restart = self._replan = self._first_start = False
         self.count("starts")
-
-    def _advise_period(self, k: int) -> None:
-        """Once per driver period seen: warn of one that ``T`` should be a multiple of
-        (:func:`~apc_feedback.robot_sampling.period_advice`), naming that period."""
-        driver_ns = self.sampler.driver_period_ns
-        if driver_ns == self._advised_driver_ns:
-            return
-        self._advised_driver_ns = driver_ns
-        if (warning := period_warning(self.period_ns, driver_ns)) is not None:
-            self.count("period_advice")
-            self.log("warn", f"sample {k}: {warning}")
 
     def _stop(self, k: int, sample: JointSample) -> None:
         """Bring the arm to rest from the ``sample``'s state, from sample ``k`` on."""
@@ -471,6 +454,8 @@ class RobotLoop:
         self._sent = (k, self.command.to_model(row))
         self.hold.sent(self._sent[1], self.gravity(sample.position))
         self.count("commands")
+        if self.payload is not None:
+            self._carry_payload(k, sample.position)
         if out.skipped:
             self.count("rls_skipped_updates")
         if out.rejected:
@@ -591,6 +576,21 @@ class RobotLoop:
             f"sample {k}: {why}; the {self.fallback.kind} fallback commands the joints, the "
             "adaptive law restarts its identification from Eq. 33",
         )
+
+    def _carry_payload(self, k: int, position: np.ndarray) -> None:
+        """Sample ``k``'s commanded torque to the payload's estimate; once it is in, the
+        model carries the payload from the next sample, the law restarting from Eq. 33."""
+        assert self.payload is not None and self._sent is not None
+        supervisor = self.supervisor
+        holding = self.plan.holding(k) and (supervisor is None or supervisor.in_charge == ADAPTIVE)
+        verdict = self.payload.observe(position, self._sent[1], holding)
+        if verdict is not None:
+            self.log("info", f"sample {k}: {verdict.text}")
+        if verdict is not None and verdict.carry_kg is not None:
+            model, self.gravity = self.payload.model_with(verdict.carry_kg)
+            self.plan.carry(model, k + 1)
+            self.law.reset()
+            self.count("payload_carried")
 
     def _hold_command(self, learned: bool = False) -> np.ndarray | None:
         newest = self.sampler.newest

@@ -103,6 +103,12 @@ from apc_feedback.controller import AdaptiveFeedback, FeedbackError
 from apc_feedback.feedback_law import FeedbackLaw
 from apc_feedback.lagged_control import input_change_cap
 from apc_feedback.laws import LawParameters
+from apc_feedback.payload_estimate import (
+    PayloadCarry,
+    PayloadEstimateConfig,
+    PayloadEstimateError,
+    payload_carry,
+)
 from apc_feedback.presets import PRESET_PARAM, law_params, preset_rows
 from apc_feedback.robot_loop import STOP_TIME_S, RobotLoop, Step
 from apc_feedback.robot_sampling import (
@@ -209,6 +215,7 @@ PARAMS: tuple[Param, ...] = (
         "'period' stays, with a warning",
     ),
     *params_from(SupervisorConfig, "supervisor."),
+    *params_from(PayloadEstimateConfig, "payload_estimate."),
     Param("autostart", False, "configure and activate at start (also: --autostart)"),
 )
 
@@ -330,6 +337,7 @@ class RobotNode(LifecycleNode):
             command_first=values["command_first"],
             feedforward_ahead=values["feedforward_ahead"],
             period_from_driver=from_driver and values["period_from_driver"],
+            payload=self._payload(values, robot, period),
             count=diag.count,
             log=level_logger(self),
             **self._supervision(values, robot),
@@ -361,6 +369,15 @@ class RobotNode(LifecycleNode):
             f"{old.sampling.period:g} s: sampling at {period:.6g} s, the multiple of it nearest "
             "(period_from_driver; false keeps 'period')"
         )
+
+    @staticmethod
+    def _payload(values: dict[str, Any], robot: Any, period: float) -> PayloadCarry | None:
+        """The payload's estimate in the hold (``payload_estimate.*``), None if disabled."""
+        try:
+            config = PayloadEstimateConfig.from_dict(subset(values, "payload_estimate."))
+            return payload_carry(robot, config, period)
+        except PayloadEstimateError as exc:
+            raise ConfigError(f"parameter 'payload_estimate.{exc.field}': {exc}") from None
 
     @staticmethod
     def _supervision(values: dict[str, Any], robot: Any) -> dict:

@@ -471,3 +471,19 @@ def period_warning(period_ns: int, driver_ns: int) -> str | None:
         "command's delay changes from sample to sample, which the adaptive law does not "
         f"model; set 'period' to a multiple of the driver's ({multiple:.4g} s)"
     )
+
+
+class PeriodAdvice:
+    """Robot mode's warning of a driver whose period ``T`` should be a multiple of
+    (:func:`period_warning`), once per driver period seen."""
+
+    def __init__(self, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self._judged_ns = 0  # the driver period judged last
+
+    def warning(self, driver_ns: int) -> str | None:
+        """The warning for ``driver_ns`` the first time it is seen (in a row), else None."""
+        if driver_ns == self._judged_ns:
+            return None
+        self._judged_ns = driver_ns
+        return period_warning(self.period_ns, driver_ns)

@@ -301,6 +301,24 @@ class GoalQueue:
         ff = self.feedforward
         return ff is not None and ff.trajectory is self._stop_plan and ff.start_k <= k < ff.end_k()
 
+    def holding(self, k: int) -> bool:
+        """Whether set point ``k`` holds still: before the plan's motion starts or after it
+        has ended, with no goal queued."""
+        ff = self.feedforward
+        return ff is not None and not ff.start_k <= k < ff.end_k() and not self.queued
+
+    def carry(self, model: pin.Model, k: int) -> None:
+        """From sample ``k`` on the nominal torques are ``model``'s (robot mode carrying the
+        payload it estimated, :mod:`apc_feedback.payload_estimate`): the hold goes on, on the
+        new model, and so does every goal planned later. Only while :meth:`holding`."""
+        if not self.holding(k):
+            raise ValueError(f"sample {k}: the plan's model changes only in a hold")
+        self.model = model
+        self._next_plan = None
+        ff = self.feedforward
+        assert ff is not None
+        self.feedforward = Feedforward(model, ff.trajectory, self.period, ff.start_k)
+
     def rejoin(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> bool:
         """Rejoin the plan from the measured state at sample ``k`` (robot mode's hand-back from
         a fallback): from ``k`` on the set point starts at ``position`` and ``velocity`` and

@@ -31,6 +31,7 @@ import pinocchio as pin
 from apc_core.robot import Payload, load_robot, with_armature, with_friction, with_inertia_error
 from apc_feedback.command_map import CommandMap
 from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+from apc_feedback.payload_estimate import PayloadEstimateConfig, payload_carry
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop, Step
 from apc_feedback.robot_sampling import RobotSamplingConfig
@@ -178,6 +179,7 @@ def run_robot_loop(
     command_first: bool = False,
     feedforward_ahead: bool = True,
     period_from_driver: bool = False,
+    payload_estimate: PayloadEstimateConfig | None = None,
 ) -> RobotRun:
     """Activate at the start pose, hold, and (with ``goal_deg``) move there ``hold_s`` later.
 
@@ -244,6 +246,9 @@ def run_robot_loop(
     period_from_driver : bool
         Robot mode's ``period_from_driver``: where the loop asks for another T at its first
         start, it is built again at that T (``setup`` called again), as ``robot_node`` does.
+    payload_estimate : PayloadEstimateConfig, optional
+        Robot mode's ``payload_estimate.*`` (with ``enable``: the controllers estimate the
+        payload in the hold and carry it); None: as disabled.
     """
     T_NS = round(period_ms * MS)
     T = T_NS * 1e-9
@@ -308,6 +313,7 @@ def run_robot_loop(
             command_first=command_first,
             feedforward_ahead=feedforward_ahead,
             period_from_driver=from_driver,
+            payload=payload_carry(controller, payload_estimate, T) if payload_estimate else None,
             count=lambda name: counts.update((name,)),
             log=lambda level, text: lines.append((level, text)),
             **supervision,
