@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from apc_feedback.payload_estimate import PayloadEstimateConfig
 from apc_feedback.presets import recommended_settings
 from apc_feedback.robot_loop import RobotLoop
 from apc_feedback.supervisor import SupervisorConfig
@@ -100,6 +101,7 @@ def one_run(
     friction: bool = True,
     latency: Latency | None = None,
     payload_factor: float | None = None,
+    payload_estimate: bool = False,
 ) -> dict:
     """Run ``index`` of a cell: max error, error at the move's end and at the run's end per
     joint (deg), hand-overs, the commands' chatter in the hold (N m).
@@ -110,7 +112,8 @@ def one_run(
     rotor inertia (:func:`controller_armature`), its friction (:func:`controller_friction`;
     neither for effects given as themselves: what they cost unknown). ``latency``, in place
     of ``late``'s, and ``payload_factor``, in place of :data:`PAYLOAD_FACTORS`' ``index``-th:
-    for runs outside the grid (``bench/activation_bursts.py``).
+    for runs outside the grid (``bench/activation_bursts.py``). ``payload_estimate``: robot
+    mode estimates the payload in the hold (:func:`payload_estimate_config`).
     """
     scenario = arm_scenario(arm, "c")
     driver_ms = 1000.0 / rate_hz
@@ -144,6 +147,7 @@ def one_run(
         friction=controller_friction(arm, effects)
         if friction and isinstance(effects, str)
         else None,
+        payload_estimate=payload_estimate_config(arm) if payload_estimate else None,
     )
     errors = run.tracking_error_deg()
     return {
@@ -157,6 +161,15 @@ def one_run(
             2,
         ),
     }
+
+
+def payload_estimate_config(arm: str) -> PayloadEstimateConfig:
+    """Robot mode's payload estimate on ``arm``, told where its payload is fixed (the robot
+    file's ``payload_estimate.*``)."""
+    scenario = arm_scenario(arm, "c")
+    return PayloadEstimateConfig(
+        enable=True, frame=scenario.payload_frame or "", com_m=tuple(scenario.payload_com_m)
+    )
 
 
 def summarise(runs: list[dict]) -> dict:
@@ -194,11 +207,12 @@ def measure(
     armature: bool = True,
     feedforward_ahead: bool = True,
     friction: bool = True,
+    payload_estimate: bool = False,
 ) -> list[dict]:
     """Every cell of ``arms``; ``settings``: the adaptive law's (default: the recommended
     preset); ``ideal_velocity``: the ideal arm's states carry its exact velocity;
     ``armature``, ``friction``: the controllers know a physical arm's rotor inertia, its
-    friction; ``feedforward_ahead``: robot mode's."""
+    friction; ``feedforward_ahead``, ``payload_estimate``: robot mode's."""
     cells = []
     for arm in arms:
         for effects in EFFECTS:
@@ -218,6 +232,7 @@ def measure(
                                 armature=armature,
                                 feedforward_ahead=feedforward_ahead,
                                 friction=friction,
+                                payload_estimate=payload_estimate,
                             )
                             for i in range(len(PAYLOAD_FACTORS))
                         ]
@@ -347,6 +362,11 @@ def parser() -> argparse.ArgumentParser:
         help="robot mode's feedforward_ahead off: the nominal torque of the sample's own time",
     )
     cli.add_argument(
+        "--payload-estimate",
+        action="store_true",
+        help="robot mode estimates the payload in the hold (payload_estimate.enable)",
+    )
+    cli.add_argument(
         "--alpha-model",
         dest="set",
         action="append",
@@ -381,6 +401,7 @@ def main() -> None:
         not args.no_armature,
         not args.no_feedforward_ahead,
         not args.no_friction,
+        args.payload_estimate,
     )
     print()
     print(markdown(cells), end="")
@@ -392,6 +413,7 @@ def main() -> None:
             "armature": not args.no_armature,
             "friction": not args.no_friction,
             "feedforward_ahead": not args.no_feedforward_ahead,
+            "payload_estimate": args.payload_estimate,
             "alpha_model": changed.get("alpha_model"),
             "settings_overrides": changed,
             "cells": cells,

@@ -517,15 +517,51 @@ def test_a_125_hz_driver_gets_a_sampling_period_of_its_own_in_simulated_time(gra
     assert "does not divide the sampling period" not in text  # the warning without it
 
 
-def test_bad_parameter_stops_autostart_with_one_line():
+def test_the_payload_estimated_in_the_hold_is_carried_in_simulated_time(graph, tmp_path):
+    """``payload_estimate.enable`` with the payload's frame: robot_node learns the 5 lb at
+    the wrist centre in the hold after activation (logged once, counted), carries it, and
+    tracks the paper's move."""
+    driver = graph.add(Driver(graph.context, time_scale=TIME_SCALE))
+    observer = graph.add(rclpy.create_node("observer", context=graph.context))
+    diag = Diagnostics(observer, "/robot_node")
+    params = {"payload_estimate.enable": True, "payload_estimate.frame": "wrist_center"}
+    with _controllers(tmp_path, use_sim_time=True, **params) as log_path:
+        graph.spin_until(lambda: driver.commands, 30, "the first command")
+        _spin_sim(graph, driver, 0.7)
+        graph.spin_until(lambda: diag.count("payload_carried") == 1, 10, "the payload carried")
+        goals = _goal_publisher(graph, observer)
+        goals.publish(_goal_msg(GOAL_DEG))
+        _spin_sim(graph, driver, 1.3)
+        assert np.max(np.abs(driver.q_deg() - GOAL_DEG)) < 0.5
+        assert diag.count("supervisor.handovers") == 0 and diag.count("watchdog") == 0
+    lines = [line for line in log_path.read_text().splitlines() if "holds still with" in line]
+    assert len(lines) == 1, lines
+    mass = float(lines[0].split("holds still with ")[1].split(" kg")[0])
+    assert 2.0 < mass < 2.6  # 2.268 kg, less what the PUMA's model holds of it
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (
+            ["-p", "path_tolerance:=[1.0, 2.0]"],
+            "robot_node: parameter 'path_tolerance': needs 1 or 3 values, got 2",
+        ),
+        (
+            ["-p", "payload_estimate.enable:=true", "-p", "payload_estimate.frame:=no_such"],
+            "robot_node: parameter 'payload_estimate.frame': payload frame 'no_such' is not",
+        ),
+    ],
+)
+def test_bad_parameter_stops_autostart_with_one_line(args, line):
     out = subprocess.run(
-        [str(BIN / "robot_node"), "--autostart", "--ros-args", "-p", "path_tolerance:=[1.0, 2.0]"],
+        [str(BIN / "robot_node"), "--autostart", "--ros-args", *args],
         capture_output=True,
         text=True,
         timeout=60,
     )
     assert out.returncode == 2
-    assert "robot_node: parameter 'path_tolerance': needs 1 or 3 values, got 2" in out.stderr
+    assert line in out.stderr
 
 
 def test_diagnostics_show_the_input_change_weight_in_use_and_when_it_is_at_its_cap():

@@ -42,8 +42,8 @@ class PayloadEstimateConfig:
 
     enable: bool = setting(
         False,
-        "estimate the payload at the first still hold after each activation and carry it in "
-        "the model (docs/robot.md, 'A payload estimated in the hold')",
+        "adaptive law: estimate the payload at the first still hold after each activation and "
+        "carry it in the model (docs/robot.md, 'A payload estimated in the hold')",
     )
     frame: str = setting(
         "", "URDF frame the payload is fixed to (a tool flange); '' is the last joint's body"

@@ -372,9 +372,12 @@ class RobotNode(LifecycleNode):
 
     @staticmethod
     def _payload(values: dict[str, Any], robot: Any, period: float) -> PayloadCarry | None:
-        """The payload's estimate in the hold (``payload_estimate.*``), None if disabled."""
+        """The payload's estimate in the hold (``payload_estimate.*``) for the adaptive law;
+        None if disabled, and for another law (a baseline keeps the model it is given)."""
         try:
             config = PayloadEstimateConfig.from_dict(subset(values, "payload_estimate."))
+            if values["controller"] != "adaptive":
+                return None
             return payload_carry(robot, config, period)
         except PayloadEstimateError as exc:
             raise ConfigError(f"parameter 'payload_estimate.{exc.field}': {exc}") from None
