@@ -46,20 +46,20 @@ def _carry(robot=PUMA, **config) -> PayloadCarry:
 
 def test_a_still_hold_gives_the_payloads_mass():
     """Torques that hold the arm still with 2.27 kg at the wrist centre: that mass, once the
-    window (0.2 s) is full, and again at another pose."""
+    hold has settled (0.3 s) and the window (0.2 s) is full, and again at another pose."""
     carry = _carry(frame="wrist_center")
     estimate = carry.estimate
-    assert estimate.samples == 20
+    assert (estimate.settle, estimate.samples) == (30, 20)
     for pose in (POSE, np.deg2rad([-40.0, 10.0, -90.0])):
         loaded = _gravity(with_payload(PUMA, Payload(2.268, frame="wrist_center")))
         estimate.reset()
-        found = [estimate.add(pose, loaded(pose)) for _ in range(20)]
-        assert found[:-1] == [None] * 19
+        found = [estimate.add(pose, loaded(pose)) for _ in range(50)]
+        assert found[:-1] == [None] * 49
         assert found[-1] == pytest.approx(2.268, rel=1e-9)
 
 
 def test_a_moving_arm_starts_the_window_again():
-    estimate = _carry().estimate
+    estimate = _carry(settle_s=0.0).estimate
     loaded = _gravity(with_payload(PUMA, Payload(1.0)))
     for _ in range(15):
         assert estimate.add(POSE, loaded(POSE)) is None
@@ -69,32 +69,53 @@ def test_a_moving_arm_starts_the_window_again():
     assert found[:-1] == [None] * 18 and found[-1] == pytest.approx(1.0, rel=1e-9)
 
 
+def test_the_model_takes_an_estimate_on_in_steps_while_the_arm_holds():
+    """0.3 s at T = 10 ms: ten steps, every third sample; a move pauses the ramp, which goes
+    on at the next hold; the last step is the one counted."""
+    carry = _carry(settle_s=0.0)
+    loaded = _gravity(with_payload(PUMA, Payload(2.0)))
+    steps = [carry.observe(POSE, loaded(POSE), True) for _ in range(20)]
+    assert steps[19].text is not None and "takes it on" in steps[19].text
+    assert steps[19].carry_kg == pytest.approx(0.2) and not steps[19].carried
+    more = [carry.observe(POSE, loaded(POSE), True) for _ in range(9)]
+    every_third = [s.carry_kg for s in more][2::3]
+    assert every_third == [pytest.approx(0.4), pytest.approx(0.6), pytest.approx(0.8)]
+    assert sum(s.carry_kg is not None for s in more) == 3
+    assert all(carry.observe(POSE, loaded(POSE), False).carry_kg is None for _ in range(10))
+    rest = [carry.observe(POSE, loaded(POSE), True) for _ in range(30)]
+    given = [s for s in rest if s.carry_kg is not None]
+    assert len(given) == 6 and given[-1].carry_kg == pytest.approx(2.0) and given[-1].carried
+    assert sum(s.carried for s in rest) == 1 and carry.carried_kg == pytest.approx(2.0)
+
+
 def test_the_verdicts_carry_refuse_and_drop():
-    """Within [min_kg, max_kg]: carried. Below min_kg: nothing (or back to none). Above
+    """Within [min_kg, max_kg]: taken on. Below min_kg: nothing (or back to none). Above
     max_kg: refused, the model kept. One verdict per activation."""
-    carry = _carry(max_kg=5.0)
+    carry = _carry(max_kg=5.0, settle_s=0.0, ramp_s=0.0)
     gravity = _gravity(PUMA)
 
-    def hold(mass: float):
+    def hold(mass: float) -> list:
         loaded = _gravity(with_payload(PUMA, Payload(mass)))
         carry.start()
-        verdicts = [carry.observe(POSE, loaded(POSE), True) for _ in range(25)]
-        given = [v for v in verdicts if v is not None]
-        assert len(given) == 1
-        return given[0]
+        steps = [carry.observe(POSE, loaded(POSE), True) for _ in range(25)]
+        assert sum(s.text is not None for s in steps) == 1
+        return steps
 
     first = hold(2.0)
-    assert first.carry_kg == pytest.approx(2.0) and "carries 2 kg" in first.text
+    assert [s.carry_kg for s in first if s.carry_kg is not None] == [pytest.approx(2.0)]
+    assert carry.carried_kg == pytest.approx(2.0)
     again = hold(2.0)
-    assert again.carry_kg is None and "already" in again.text
+    assert all(s.carry_kg is None for s in again)
+    assert any(s.text is not None and "already" in s.text for s in again)
     heavy = hold(8.0)
-    assert heavy.carry_kg is None and "payload_estimate.max_kg (5 kg)" in heavy.text
+    assert all(s.carry_kg is None for s in heavy)
+    assert any(s.text is not None and "max_kg (5 kg)" in s.text for s in heavy)
     assert carry.carried_kg == pytest.approx(2.0)
     gone = hold(0.05)
-    assert gone.carry_kg == 0.0 and carry.carried_kg == 0.0
+    assert [s.carry_kg for s in gone if s.carry_kg is not None] == [0.0]
     # not holding: no estimate, the window starts again
     carry.start()
-    assert all(carry.observe(POSE, gravity(POSE), False) is None for _ in range(50))
+    assert all(carry.observe(POSE, gravity(POSE), False).text is None for _ in range(50))
 
 
 @pytest.mark.parametrize(
@@ -158,14 +179,14 @@ def _panda_100hz(estimate: bool):
 @pytest.mark.slow
 def test_estimated_in_the_hold_the_payload_no_longer_costs_the_physical_panda_its_move():
     """The physical Panda on a 100 Hz driver with the 2.27 kg it is not told: estimated in the
-    hold before the move (within 1 %) and carried, the move's worst error falls from 1.6 deg to
-    0.5 (measured 1.62 -> 0.49, the move's end 0.47 -> 0.23)."""
+    hold before the move (2.22 kg) and taken on, the worst error falls from 1.6 deg to 0.65
+    (measured 1.62 -> 0.64, the move's end 0.47 -> 0.24)."""
     without, carried = _panda_100hz(False), _panda_100hz(True)
     assert carried.counts["payload_carried"] == 1 and "payload_carried" not in without.counts
     line = next(text for _, text in carried.lines if "holds still" in text)
     mass = float(line.split("holds still with ")[1].split(" kg")[0])
-    assert mass == pytest.approx(2.268, rel=0.02)
+    assert mass == pytest.approx(2.268, rel=0.05)
     assert carried.counts.get("supervisor.handovers", 0) == 0
     assert without.max_tracking_error_deg() > 1.2
-    assert carried.max_tracking_error_deg() < 0.7
+    assert carried.max_tracking_error_deg() < 0.8
     assert np.max(carried.tracking_error_at_move_end_deg()) < 0.3

@@ -3,18 +3,19 @@
 Held still, an arm's joint torques balance gravity: ``tau = g(q) + m a(q)``, where ``g`` is the
 controller's model without the payload and ``a(q)`` the gravity torque of one kilogram at the
 payload's point (its frame and centre of mass, which the user tells: where the tool is, not what
-it weighs). Over a window of samples in which no joint moved by more than ``still_rad``, the
-mass is the least-squares fit of the window's mean torque less the model's gravity on
-``a``: ``m = a.(tau - g) / a.a``. The torque is what the controllers command; an arm whose
-drives hold part of the load by static friction shifts it (the physical PUMA of robot_sim,
-its Coulomb friction told to the controllers: +7 % to +20 % over windows of its first second;
-the physical Panda: within 1 %), and so does a model whose own gravity is wrong.
+it weighs). Once a hold has lasted ``settle_s``, over a window of samples in which no joint
+moved by more than ``still_rad``, the mass is the least-squares fit of the window's mean torque
+less the model's gravity on ``a``: ``m = a.(tau - g) / a.a``. The torque is what the controllers
+command; an arm whose drives hold part of the load by static friction shifts it (the physical
+PUMA of robot_sim, its Coulomb friction told to the controllers: +7 % to +20 % over windows of
+its first second; the physical Panda: within 1 %), and so does a model whose own gravity is
+wrong.
 
 Robot mode (:mod:`apc_feedback.robot_loop`) asks once per activation, in a hold with no goal
 queued; with an estimate of at least ``min_kg`` and at most ``max_kg`` it carries on with the
 payload in its model (the feedforward's plan and the watchdog's hold; the supervisor's fallback
-keeps the model without it) and the adaptive law restarts its identification: the law's
-integral held that load until then.
+keeps the model without it), ramped in over ``ramp_s`` while the law's integral, which held that
+load until then, hands it over (:class:`PayloadCarry`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Payload, Robot, with_payload
 
 Torque = Callable[[np.ndarray], np.ndarray]
+#: The most steps the model takes an estimate on in (each builds the plan's model again).
+RAMP_STEPS = 10
 
 
 class PayloadEstimateError(SettingError):
@@ -50,6 +53,18 @@ class PayloadEstimateConfig:
     )
     com_m: tuple[float, ...] = setting(
         (0.0, 0.0, 0.0), "the payload's centre of mass in 'frame' (m; x, y, z)"
+    )
+    settle_s: float = setting(
+        0.3,
+        "how long a hold lasts before its window starts: the law's answer to the load settling (s)",
+        0.0,
+        10.0,
+    )
+    ramp_s: float = setting(
+        0.3,
+        "how long the model takes to take a new estimate on, while the arm holds (s)",
+        0.0,
+        10.0,
     )
     window_s: float = setting(
         0.2, "how long the arm must hold still for the estimate (s)", 0.0, 10.0
@@ -113,16 +128,24 @@ class HoldPayloadEstimate:
             raise ValueError(f"period must be finite and > 0 s, got {period}")
         self.config = config
         self.samples = max(2, int(np.ceil(config.window_s / period - 1e-9)))
+        self.settle = int(np.ceil(config.settle_s / period - 1e-9))
         self._gravity, self._unit = gravity, unit_gravity
         self._window: list[tuple[np.ndarray, np.ndarray]] = []
+        self._held = 0  # samples of the hold so far
 
     def reset(self) -> None:
-        """Forget the window (a move, a fault, another law in charge)."""
+        """Forget the hold (a move, a fault, another law in charge): the next one settles
+        first."""
         self._window.clear()
+        self._held = 0
 
     def add(self, position: np.ndarray, torque: np.ndarray) -> float | None:
         """One sample of a hold: the measured ``position`` and the torque commanded at it.
-        Returns the mass (kg) once the last ``samples`` were still, else None."""
+        Returns the mass (kg) once the last ``samples`` after the first ``settle`` were still,
+        else None."""
+        self._held += 1
+        if self._held <= self.settle:
+            return None
         window = self._window
         window.append((position, torque))
         if len(window) > self.samples:
@@ -142,18 +165,29 @@ class HoldPayloadEstimate:
         return float(unit @ residual) / norm
 
 
-class PayloadVerdict(NamedTuple):
-    """What one estimate comes to: the mass measured, the mass to carry from now on (None:
-    the model stays as it is) and the line that says so."""
+class PayloadStep(NamedTuple):
+    """What one sample of a hold comes to: the line to log (the estimate's verdict), the mass
+    the model carries from the next sample (None: as it is), and whether that ends the ramp to
+    the estimate (counted: ``payload_carried``)."""
 
-    measured_kg: float
-    carry_kg: float | None
-    text: str
+    text: str | None = None
+    carry_kg: float | None = None
+    carried: bool = False
+
+
+NO_STEP = PayloadStep()
 
 
 class PayloadCarry:
     """Robot mode's payload: estimated at the first still hold of an activation, and what the
     controllers' model carries (see the module docstring).
+
+    The model takes the estimate in ``ramp_steps`` equal steps over ``ramp_s``, while the arm
+    holds: the law's integral, which held the load until then, hands it over as the nominal
+    torque takes it on, with no identification restarted (taken at once, the integral's torque
+    came on top of the nominal one: a bump of 0.6 deg on the physical Panda; with the law
+    restarted from Eq. 33 instead, the ideal Panda at 250 Hz with late commands was lost in
+    one more run of five).
 
     Parameters
     ----------
@@ -161,54 +195,70 @@ class PayloadCarry:
     model_with : callable
         ``model_with(m)``: the controller's model with ``m`` kg at the payload's point, as
         ``(pinocchio model for the plan, its gravity g(q))``.
+    ramp_samples : int
+        Samples over which the model takes a new estimate (in at most ``RAMP_STEPS`` steps).
     """
 
     def __init__(
-        self, estimate: HoldPayloadEstimate, model_with: Callable[[float], tuple[Any, Torque]]
+        self,
+        estimate: HoldPayloadEstimate,
+        model_with: Callable[[float], tuple[Any, Torque]],
+        ramp_samples: int = 1,
     ) -> None:
         self.estimate = estimate
         self.model_with = model_with
-        self.carried_kg = 0.0
+        self.carried_kg = self.target_kg = 0.0
         self.measured_kg: float | None = None
         self._done = False
+        steps = max(1, min(RAMP_STEPS, ramp_samples))
+        self._every = max(1, ramp_samples // steps)  # samples between steps
+        self._steps = steps
+        self._from_kg, self._step, self._wait = 0.0, steps, 0
 
     def start(self) -> None:
         """An activation: estimate again at its first still hold."""
         self._done = False
         self.estimate.reset()
 
-    def observe(
-        self, position: np.ndarray, torque: np.ndarray, holding: bool
-    ) -> PayloadVerdict | None:
+    def observe(self, position: np.ndarray, torque: np.ndarray, holding: bool) -> PayloadStep:
         """One sample: its measured position, the torque commanded at it, and whether the
-        adaptive law holds the arm still on the plan. The verdict once the estimate is in."""
-        if self._done:
-            return None
+        adaptive law holds the arm still on the plan."""
         if not holding:
             self.estimate.reset()
-            return None
-        m = self.estimate.add(position, torque)
-        if m is None:
-            return None
+            return NO_STEP
+        text = None
+        if not self._done:
+            m = self.estimate.add(position, torque)
+            if m is not None:
+                text = self._verdict(m)
+        if self._step >= self._steps:
+            return PayloadStep(text)
+        self._wait -= 1
+        if self._wait > 0:
+            return PayloadStep(text)
+        self._step, self._wait = self._step + 1, self._every
+        share = self._step / self._steps
+        self.carried_kg = self._from_kg + share * (self.target_kg - self._from_kg)
+        return PayloadStep(text, self.carried_kg, self._step == self._steps)
+
+    def _verdict(self, m: float) -> str:
+        """Decide what the model carries after estimate ``m``; the line that says so."""
         self._done, self.measured_kg = True, m
         config = self.estimate.config
         held = f"the arm holds still with {m:.3g} kg beyond its model at the payload's point"
         if m > config.max_kg:
-            return PayloadVerdict(
-                m,
-                None,
-                f"{held}, more than payload_estimate.max_kg ({config.max_kg:g} kg): a model that "
-                "does not fit the arm, or a wrong payload_estimate.frame; not carried",
+            return (
+                f"{held}, more than payload_estimate.max_kg ({config.max_kg:g} kg): a model "
+                "that does not fit the arm, or a wrong payload_estimate.frame; not carried"
             )
         target = m if m >= config.min_kg else 0.0
-        if target == self.carried_kg:
-            return PayloadVerdict(m, None, f"{held}; the model carries {target:.3g} kg already")
-        self.carried_kg = target
-        return PayloadVerdict(
-            m,
-            target,
-            f"{held}; the model carries {target:.3g} kg from the next sample and the adaptive "
-            "law restarts its identification from Eq. 33",
+        if target == self.target_kg:
+            return f"{held}; the model carries {target:.3g} kg already"
+        self.target_kg, self._from_kg = target, self.carried_kg
+        self._step, self._wait = 0, 0
+        return (
+            f"{held}; the model takes it on from the next sample over "
+            f"{self._steps * self._every} samples (was {self._from_kg:.3g} kg)"
         )
 
 
@@ -233,4 +283,4 @@ def payload_carry(
     _, gravity = model_with(0.0)
     _, loaded = model_with(1.0)
     estimate = HoldPayloadEstimate(config, period, gravity, lambda q: loaded(q) - gravity(q))
-    return PayloadCarry(estimate, model_with)
+    return PayloadCarry(estimate, model_with, int(np.ceil(config.ramp_s / period - 1e-9)))

@@ -135,7 +135,7 @@ class RobotLoop:
         instead of a start: the caller builds the loop again at it (else: a start, and a warning).
     payload : PayloadCarry, optional
         Estimates the payload at the first still hold of an activation and carries it in the
-        plan's model and ``gravity`` (counted: ``payload_carried``); None: the model stays.
+        plan's model and ``gravity`` (``payload_carried``); None: the model stays.
     """
 
     law: FeedbackLaw
@@ -578,18 +578,18 @@ class RobotLoop:
         )
 
     def _carry_payload(self, k: int, position: np.ndarray) -> None:
-        """Sample ``k``'s commanded torque to the payload's estimate; once it is in, the
-        model carries the payload from the next sample, the law restarting from Eq. 33."""
+        """Sample ``k``'s commanded torque to the payload's estimate, which the model takes on
+        over the next samples of the hold (:class:`PayloadCarry`)."""
         assert self.payload is not None and self._sent is not None
-        supervisor = self.supervisor
-        holding = self.plan.holding(k) and (supervisor is None or supervisor.in_charge == ADAPTIVE)
-        verdict = self.payload.observe(position, self._sent[1], holding)
-        if verdict is not None:
-            self.log("info", f"sample {k}: {verdict.text}")
-        if verdict is not None and verdict.carry_kg is not None:
-            model, self.gravity = self.payload.model_with(verdict.carry_kg)
+        fallback = self.supervisor is not None and self.supervisor.in_charge != ADAPTIVE
+        holding = self.plan.holding(k + 1) and not fallback
+        step = self.payload.observe(position, self._sent[1], holding)
+        if step.text is not None:
+            self.log("info", f"sample {k}: {step.text}")
+        if step.carry_kg is not None:
+            model, self.gravity = self.payload.model_with(step.carry_kg)
             self.plan.carry(model, k + 1)
-            self.law.reset()
+        if step.carried:
             self.count("payload_carried")
 
     def _hold_command(self, learned: bool = False) -> np.ndarray | None:
