@@ -69,29 +69,31 @@ def test_a_moving_arm_starts_the_window_again():
     assert found[:-1] == [None] * 18 and found[-1] == pytest.approx(1.0, rel=1e-9)
 
 
-def test_the_model_takes_an_estimate_on_in_steps_while_the_arm_holds():
-    """0.3 s at T = 10 ms: ten steps, every third sample; a move pauses the ramp, which goes
-    on at the next hold; the last step is the one counted."""
-    carry = _carry(settle_s=0.0)
-    loaded = _gravity(with_payload(PUMA, Payload(2.0)))
-    steps = [carry.observe(POSE, loaded(POSE), True) for _ in range(20)]
-    assert steps[19].text is not None and "takes it on" in steps[19].text
-    assert steps[19].carry_kg == pytest.approx(0.2) and not steps[19].carried
-    more = [carry.observe(POSE, loaded(POSE), True) for _ in range(9)]
-    every_third = [s.carry_kg for s in more][2::3]
-    assert every_third == [pytest.approx(0.4), pytest.approx(0.6), pytest.approx(0.8)]
-    assert sum(s.carry_kg is not None for s in more) == 3
-    assert all(carry.observe(POSE, loaded(POSE), False).carry_kg is None for _ in range(10))
-    rest = [carry.observe(POSE, loaded(POSE), True) for _ in range(30)]
-    given = [s for s in rest if s.carry_kg is not None]
-    assert len(given) == 6 and given[-1].carry_kg == pytest.approx(2.0) and given[-1].carried
-    assert sum(s.carried for s in rest) == 1 and carry.carried_kg == pytest.approx(2.0)
+def test_the_law_forgets_the_offset_that_held_the_load_and_keeps_its_model():
+    """The adaptive law after ``forget_offset``: its integral and ``ŵ`` zero, ``F̂``, ``Ĝ``
+    and ``P`` as identified."""
+    from apc_feedback.controller import AdaptiveConfig, AdaptiveFeedback
+    from apc_feedback.presets import recommended_settings
+
+    law = AdaptiveFeedback(PUMA.model, AdaptiveConfig.from_dict(recommended_settings()))
+    q_d = POSE
+    zero = np.zeros(3)
+    for k in range(40):  # the arm sags 1 mrad a sample under a load the model lacks
+        q = q_d - 1e-3 * min(k, 5) * np.ones(3)
+        law.update(k, q, zero, q_d, zero, zero, _gravity(PUMA)(q_d), None)
+    assert np.any(law.integral != 0.0) and np.any(law.rls.w != 0.0)
+    F, G, P = law.rls.F, law.rls.G, law.rls.P
+    law.forget_offset()
+    assert np.all(law.integral == 0.0) and np.all(law.rls.w == 0.0)
+    np.testing.assert_array_equal(law.rls.F, F)
+    np.testing.assert_array_equal(law.rls.G, G)
+    np.testing.assert_array_equal(law.rls.P, P)
 
 
 def test_the_verdicts_carry_refuse_and_drop():
-    """Within [min_kg, max_kg]: taken on. Below min_kg: nothing (or back to none). Above
+    """Within [min_kg, max_kg]: carried. Below min_kg: nothing (or back to none). Above
     max_kg: refused, the model kept. One verdict per activation."""
-    carry = _carry(max_kg=5.0, settle_s=0.0, ramp_s=0.0)
+    carry = _carry(max_kg=5.0, settle_s=0.0)
     gravity = _gravity(PUMA)
 
     def hold(mass: float) -> list:
@@ -99,23 +101,20 @@ def test_the_verdicts_carry_refuse_and_drop():
         carry.start()
         steps = [carry.observe(POSE, loaded(POSE), True) for _ in range(25)]
         assert sum(s.text is not None for s in steps) == 1
-        return steps
+        return next(s for s in steps if s.text is not None)
 
     first = hold(2.0)
-    assert [s.carry_kg for s in first if s.carry_kg is not None] == [pytest.approx(2.0)]
-    assert carry.carried_kg == pytest.approx(2.0)
+    assert first.carry_kg == pytest.approx(2.0) and "carries 2 kg" in first.text
     again = hold(2.0)
-    assert all(s.carry_kg is None for s in again)
-    assert any(s.text is not None and "already" in s.text for s in again)
+    assert again.carry_kg is None and "already" in again.text
     heavy = hold(8.0)
-    assert all(s.carry_kg is None for s in heavy)
-    assert any(s.text is not None and "max_kg (5 kg)" in s.text for s in heavy)
+    assert heavy.carry_kg is None and "max_kg (5 kg)" in heavy.text
     assert carry.carried_kg == pytest.approx(2.0)
     gone = hold(0.05)
-    assert [s.carry_kg for s in gone if s.carry_kg is not None] == [0.0]
+    assert gone.carry_kg == 0.0 and carry.carried_kg == 0.0
     # not holding: no estimate, the window starts again
     carry.start()
-    assert all(carry.observe(POSE, gravity(POSE), False).text is None for _ in range(50))
+    assert all(carry.observe(POSE, gravity(POSE), False) == (None, None) for _ in range(50))
 
 
 @pytest.mark.parametrize(
@@ -179,8 +178,8 @@ def _panda_100hz(estimate: bool):
 @pytest.mark.slow
 def test_estimated_in_the_hold_the_payload_no_longer_costs_the_physical_panda_its_move():
     """The physical Panda on a 100 Hz driver with the 2.27 kg it is not told: estimated in the
-    hold before the move (2.22 kg) and taken on, the worst error falls from 1.6 deg to 0.65
-    (measured 1.62 -> 0.64, the move's end 0.47 -> 0.24)."""
+    hold before the move and carried, the worst error falls from 1.6 deg to 0.5 (measured 1.62
+    -> 0.53, the move's end 0.47 -> 0.23)."""
     without, carried = _panda_100hz(False), _panda_100hz(True)
     assert carried.counts["payload_carried"] == 1 and "payload_carried" not in without.counts
     line = next(text for _, text in carried.lines if "holds still" in text)
@@ -188,5 +187,5 @@ def test_estimated_in_the_hold_the_payload_no_longer_costs_the_physical_panda_it
     assert mass == pytest.approx(2.268, rel=0.05)
     assert carried.counts.get("supervisor.handovers", 0) == 0
     assert without.max_tracking_error_deg() > 1.2
-    assert carried.max_tracking_error_deg() < 0.8
+    assert carried.max_tracking_error_deg() < 0.7
     assert np.max(carried.tracking_error_at_move_end_deg()) < 0.3

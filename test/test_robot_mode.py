@@ -527,8 +527,7 @@ def test_the_payload_estimated_in_the_hold_is_carried_in_simulated_time(graph, t
     params = {"payload_estimate.enable": True, "payload_estimate.frame": "wrist_center"}
     with _controllers(tmp_path, use_sim_time=True, **params) as log_path:
         graph.spin_until(lambda: driver.commands, 30, "the first command")
-        # settled 0.3 s, still 0.2 s, taken on over 0.3 s
-        _spin_sim(graph, driver, 1.0)
+        _spin_sim(graph, driver, 0.7)  # settled 0.3 s, then still for 0.2 s
         graph.spin_until(lambda: diag.count("payload_carried") == 1, 10, "the payload carried")
         goals = _goal_publisher(graph, observer)
         goals.publish(_goal_msg(GOAL_DEG))

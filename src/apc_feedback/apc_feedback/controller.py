@@ -428,6 +428,13 @@ class AdaptiveFeedback(FeedbackLaw):
             command = np.clip(u_n + du, self._effort_floor, self._effort_limit)
             self._observed.append((k, command - u_n))
 
+    def forget_offset(self) -> None:
+        """The integral and ``ŵ`` start again from zero, the identified ``F̂``, ``Ĝ`` and ``P``
+        kept: the nominal torque has taken on the load they held (robot mode carrying an
+        estimated payload, :mod:`apc_feedback.payload_estimate`)."""
+        self.integral = np.zeros(self.n_joints)
+        self.rls.clear_offset()
+
     def restart(self) -> None:
         """:meth:`reset`, keeping this law's commands still on their way (with lags, its next
         start plans with them as with a fallback's, :meth:`observe_command`): for a change of

@@ -14,8 +14,8 @@ wrong.
 Robot mode (:mod:`apc_feedback.robot_loop`) asks once per activation, in a hold with no goal
 queued; with an estimate of at least ``min_kg`` and at most ``max_kg`` it carries on with the
 payload in its model (the feedforward's plan and the watchdog's hold; the supervisor's fallback
-keeps the model without it), ramped in over ``ramp_s`` while the law's integral, which held that
-load until then, hands it over (:class:`PayloadCarry`).
+keeps the model without it), and the law's integral and offset, which held that load until
+then, start again from zero (:class:`PayloadCarry`).
 """
 
 from __future__ import annotations
@@ -31,8 +31,6 @@ from apc_core.params import SettingError, check_settings, setting, settings_from
 from apc_core.robot import Payload, Robot, with_payload
 
 Torque = Callable[[np.ndarray], np.ndarray]
-#: The most steps the model takes an estimate on in (each builds the plan's model again).
-RAMP_STEPS = 10
 
 
 class PayloadEstimateError(SettingError):
@@ -57,12 +55,6 @@ class PayloadEstimateConfig:
     settle_s: float = setting(
         0.3,
         "how long a hold lasts before its window starts: the law's answer to the load settling (s)",
-        0.0,
-        10.0,
-    )
-    ramp_s: float = setting(
-        0.3,
-        "how long the model takes to take a new estimate on, while the arm holds (s)",
         0.0,
         10.0,
     )
@@ -166,13 +158,11 @@ class HoldPayloadEstimate:
 
 
 class PayloadStep(NamedTuple):
-    """What one sample of a hold comes to: the line to log (the estimate's verdict), the mass
-    the model carries from the next sample (None: as it is), and whether that ends the ramp to
-    the estimate (counted: ``payload_carried``)."""
+    """What one sample of a hold comes to: the line to log (the estimate's verdict) and the
+    mass the model carries from the next sample on (None: as it is)."""
 
     text: str | None = None
     carry_kg: float | None = None
-    carried: bool = False
 
 
 NO_STEP = PayloadStep()
@@ -182,12 +172,10 @@ class PayloadCarry:
     """Robot mode's payload: estimated at the first still hold of an activation, and what the
     controllers' model carries (see the module docstring).
 
-    The model takes the estimate in ``ramp_steps`` equal steps over ``ramp_s``, while the arm
-    holds: the law's integral, which held the load until then, hands it over as the nominal
-    torque takes it on, with no identification restarted (taken at once, the integral's torque
-    came on top of the nominal one: a bump of 0.6 deg on the physical Panda; with the law
-    restarted from Eq. 33 instead, the ideal Panda at 250 Hz with late commands was lost in
-    one more run of five).
+    The model takes an estimate on at once and the adaptive law forgets what held the load
+    until then, its integral and ``ŵ``, keeping its identified ``F̂``, ``Ĝ``
+    (``AdaptiveFeedback.forget_offset``): a bumpless hand-over of the load from the law to the
+    nominal torque (docs/robot.md, "A payload estimated in the hold", has the ways tried).
 
     Parameters
     ----------
@@ -195,25 +183,16 @@ class PayloadCarry:
     model_with : callable
         ``model_with(m)``: the controller's model with ``m`` kg at the payload's point, as
         ``(pinocchio model for the plan, its gravity g(q))``.
-    ramp_samples : int
-        Samples over which the model takes a new estimate (in at most ``RAMP_STEPS`` steps).
     """
 
     def __init__(
-        self,
-        estimate: HoldPayloadEstimate,
-        model_with: Callable[[float], tuple[Any, Torque]],
-        ramp_samples: int = 1,
+        self, estimate: HoldPayloadEstimate, model_with: Callable[[float], tuple[Any, Torque]]
     ) -> None:
         self.estimate = estimate
         self.model_with = model_with
-        self.carried_kg = self.target_kg = 0.0
+        self.carried_kg = 0.0
         self.measured_kg: float | None = None
         self._done = False
-        steps = max(1, min(RAMP_STEPS, ramp_samples))
-        self._every = max(1, ramp_samples // steps)  # samples between steps
-        self._steps = steps
-        self._from_kg, self._step, self._wait = 0.0, steps, 0
 
     def start(self) -> None:
         """An activation: estimate again at its first still hold."""
@@ -222,43 +201,31 @@ class PayloadCarry:
 
     def observe(self, position: np.ndarray, torque: np.ndarray, holding: bool) -> PayloadStep:
         """One sample: its measured position, the torque commanded at it, and whether the
-        adaptive law holds the arm still on the plan."""
+        adaptive law holds the arm still on the plan (the next sample too)."""
         if not holding:
             self.estimate.reset()
             return NO_STEP
-        text = None
-        if not self._done:
-            m = self.estimate.add(position, torque)
-            if m is not None:
-                text = self._verdict(m)
-        if self._step >= self._steps:
-            return PayloadStep(text)
-        self._wait -= 1
-        if self._wait > 0:
-            return PayloadStep(text)
-        self._step, self._wait = self._step + 1, self._every
-        share = self._step / self._steps
-        self.carried_kg = self._from_kg + share * (self.target_kg - self._from_kg)
-        return PayloadStep(text, self.carried_kg, self._step == self._steps)
-
-    def _verdict(self, m: float) -> str:
-        """Decide what the model carries after estimate ``m``; the line that says so."""
+        if self._done:
+            return NO_STEP
+        m = self.estimate.add(position, torque)
+        if m is None:
+            return NO_STEP
         self._done, self.measured_kg = True, m
         config = self.estimate.config
         held = f"the arm holds still with {m:.3g} kg beyond its model at the payload's point"
         if m > config.max_kg:
-            return (
+            return PayloadStep(
                 f"{held}, more than payload_estimate.max_kg ({config.max_kg:g} kg): a model "
                 "that does not fit the arm, or a wrong payload_estimate.frame; not carried"
             )
         target = m if m >= config.min_kg else 0.0
-        if target == self.target_kg:
-            return f"{held}; the model carries {target:.3g} kg already"
-        self.target_kg, self._from_kg = target, self.carried_kg
-        self._step, self._wait = 0, 0
-        return (
-            f"{held}; the model takes it on from the next sample over "
-            f"{self._steps * self._every} samples (was {self._from_kg:.3g} kg)"
+        if target == self.carried_kg:
+            return PayloadStep(f"{held}; the model carries {target:.3g} kg already")
+        before, self.carried_kg = self.carried_kg, target
+        return PayloadStep(
+            f"{held}; the model carries {target:.3g} kg from the next sample (was "
+            f"{before:.3g} kg) and the adaptive law's integral and offset start again from zero",
+            target,
         )
 
 
@@ -283,4 +250,4 @@ def payload_carry(
     _, gravity = model_with(0.0)
     _, loaded = model_with(1.0)
     estimate = HoldPayloadEstimate(config, period, gravity, lambda q: loaded(q) - gravity(q))
-    return PayloadCarry(estimate, model_with, int(np.ceil(config.ramp_s / period - 1e-9)))
+    return PayloadCarry(estimate, model_with)

@@ -314,6 +314,13 @@ class Rls:
         self._views[self._cur].theta_t[:, : p + q] += delta
         self._can_undo = False
 
+    def clear_offset(self) -> None:
+        """Set ``ŵ`` to zero, ``[F̂ Ĝ]`` and ``P`` kept: what the offset held is in the
+        nominal torque now (robot mode carrying an estimated payload). The last update can no
+        longer be taken back."""
+        self._views[self._cur].theta_t[:, self._p + self._q] = 0.0
+        self._can_undo = False
+
     def undo(self) -> None:
         """Take back the last :meth:`update` (Θ, P and the count), e.g. when a projection
         onto physically possible parameters refuses its result.

@@ -578,8 +578,8 @@ class RobotLoop:
         )
 
     def _carry_payload(self, k: int, position: np.ndarray) -> None:
-        """Sample ``k``'s commanded torque to the payload's estimate, which the model takes on
-        over the next samples of the hold (:class:`PayloadCarry`)."""
+        """Sample ``k``'s commanded torque to the payload's estimate; once it is in, the
+        model carries it from the next sample and the law forgets what held it."""
         assert self.payload is not None and self._sent is not None
         fallback = self.supervisor is not None and self.supervisor.in_charge != ADAPTIVE
         holding = self.plan.holding(k + 1) and not fallback
@@ -589,7 +589,7 @@ class RobotLoop:
         if step.carry_kg is not None:
             model, self.gravity = self.payload.model_with(step.carry_kg)
             self.plan.carry(model, k + 1)
-        if step.carried:
+            getattr(self.law, "forget_offset", lambda: None)()
             self.count("payload_carried")
 
     def _hold_command(self, learned: bool = False) -> np.ndarray | None:
