@@ -529,6 +529,9 @@ def test_the_payload_estimated_in_the_hold_is_carried_in_simulated_time(graph, t
         graph.spin_until(lambda: driver.commands, 30, "the first command")
         _spin_sim(graph, driver, 0.7)  # settled 0.3 s, then still for 0.2 s
         graph.spin_until(lambda: diag.count("payload_carried") == 1, 10, "the payload carried")
+        graph.spin_until(lambda: "payload_kg" in diag.values, 10, "the payload on /diagnostics")
+        assert 2.0 < float(diag.values["payload_kg"]) < 2.6
+        assert diag.values["payload_kg"] == diag.values["payload_measured_kg"]
         goals = _goal_publisher(graph, observer)
         goals.publish(_goal_msg(GOAL_DEG))
         _spin_sim(graph, driver, 1.3)

@@ -133,6 +133,7 @@ class RobotDiagnostics(Diagnostics):
     law: FeedbackLaw | None = None
     sampler: RobotSampler | None = None
     echo: CommandEcho | None = None
+    payload: PayloadCarry | None = None
 
     def status(self) -> DiagnosticStatus:
         if self.timing is not None:
@@ -145,6 +146,12 @@ class RobotDiagnostics(Diagnostics):
             delay = self.echo.delay_ns
             self.values["command_applied_ms"] = (
                 "unknown" if delay is None else f"{delay * 1e-6:.2f}"
+            )
+        if self.payload is not None:  # payload_estimate: what the model carries, as measured
+            measured = self.payload.measured_kg
+            self.values["payload_kg"] = f"{self.payload.carried_kg:.3g}"
+            self.values["payload_measured_kg"] = (
+                "unknown" if measured is None else f"{measured:.3g}"
             )
         # The adaptive law's model of its input: the delay and the lags it carries.
         if isinstance(self.law, AdaptiveFeedback):
@@ -343,7 +350,7 @@ class RobotNode(LifecycleNode):
             **self._supervision(values, robot),
         )
         diag.timing, diag.law = loop.timing, loop.law
-        diag.sampler, diag.echo = loop.sampler, loop.echo
+        diag.sampler, diag.echo, diag.payload = loop.sampler, loop.echo, loop.payload
         self._period_ns = wire.seconds_to_ns(period)
         return loop
 
