@@ -139,7 +139,7 @@ class HoldPayloadEstimate:
         if self._held <= self.settle:
             return None
         window = self._window
-        window.append((position, torque))
+        window.append((position.copy(), torque.copy()))  # the caller may reuse its arrays
         if len(window) > self.samples:
             window.pop(0)
         q = np.array([p for p, _ in window])
