@@ -202,10 +202,10 @@ class PayloadCarry:
     def observe(self, position: np.ndarray, torque: np.ndarray, holding: bool) -> PayloadStep:
         """One sample: its measured position, the torque commanded at it, and whether the
         adaptive law holds the arm still on the plan (the next sample too)."""
+        if self._done:
+            return NO_STEP  # once an activation: start() opens the next one
         if not holding:
             self.estimate.reset()
-            return NO_STEP
-        if self._done:
             return NO_STEP
         m = self.estimate.add(position, torque)
         if m is None:
