@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from apc_feedback.adaptive_config import MAX_INPUT_LAGS, AdaptiveConfig, FeedbackError
+from apc_feedback.arrays import finite_array
 from apc_feedback.feedback_law import FeedbackLaw, FeedbackOutput
 from apc_feedback.input_gain_check import velocity_gain_physical
 from apc_feedback.input_timing import InputTiming
@@ -428,12 +429,25 @@ class AdaptiveFeedback(FeedbackLaw):
             command = np.clip(u_n + du, self._effort_floor, self._effort_limit)
             self._observed.append((k, command - u_n))
 
-    def forget_offset(self) -> None:
-        """The integral and ``ŵ`` start again from zero, the identified ``F̂``, ``Ĝ`` and ``P``
-        kept: the nominal torque has taken on the load they held (robot mode carrying an
-        estimated payload, :mod:`apc_feedback.payload_estimate`)."""
-        self.integral = np.zeros(self.n_joints)
-        self.rls.clear_offset()
+    def move_nominal(self, shift: np.ndarray) -> None:
+        """From the next sample ``u_n`` is ``shift`` (shape (n,)) higher for the same torque
+        on the arm (robot mode carrying an estimated payload, whose load the law held): every
+        ``δu`` the law remembers is measured from the new ``u_n`` (the regressor's inputs, the
+        last command, a fallback's commands on their way) and ``ŵ`` takes what they held
+        (:meth:`apc_feedback.rls.Rls.move_input_origin`). The identified model predicts as
+        before and the integral, ``F̂``, ``Ĝ`` and ``P`` stay: the next command is the one
+        the law would have sent, but for ``R`` of Eq. 34 now weighing ``δu`` from the new
+        ``u_n``. Raises :class:`FeedbackError` on a wrong shape or a non-finite entry."""
+        shift = finite_array("shift", shift, (self.n_joints,), FeedbackError)
+        self.rls.move_input_origin(shift)
+        self._inputs -= shift  # in place: they are the regressor's
+        self._u_n_prev += shift
+        self._du_prev = self._du_prev - shift  # a new array: the last output's du is the caller's
+        for i, (k_sent, du_sent) in enumerate(self._observed):
+            self._observed[i] = (k_sent, du_sent - shift)
+        self._gain = None  # defer_learning: a plan made on the old origin is made again
+        if self._pending is not None:  # and the re-linearisation left to do is at the new u_n
+            self._pending = self._pending._replace(u_n=self._pending.u_n + shift)
 
     def restart(self) -> None:
         """:meth:`reset`, keeping this law's commands still on their way (with lags, its next

@@ -14,8 +14,8 @@ wrong.
 Robot mode (:mod:`apc_feedback.robot_loop`) asks once per activation, in a hold with no goal
 queued; with an estimate of at least ``min_kg`` and at most ``max_kg`` it carries on with the
 payload in its model (the feedforward's plan and the watchdog's hold; the supervisor's fallback
-keeps the model without it), and the law's integral and offset, which held that load until
-then, start again from zero (:class:`PayloadCarry`).
+keeps the model without it), and the adaptive law hands the load it held until then over to
+the nominal torque without a bump (:class:`PayloadCarry`).
 """
 
 from __future__ import annotations
@@ -172,10 +172,11 @@ class PayloadCarry:
     """Robot mode's payload: estimated at the first still hold of an activation, and what the
     controllers' model carries (see the module docstring).
 
-    The model takes an estimate on at once and the adaptive law forgets what held the load
-    until then, its integral and ``ŵ``, keeping its identified ``F̂``, ``Ĝ``
-    (``AdaptiveFeedback.forget_offset``): a bumpless hand-over of the load from the law to the
-    nominal torque (docs/robot.md, "A payload estimated in the hold", has the ways tried).
+    The model takes an estimate on at once and the adaptive law measures its inputs from the
+    new nominal torque, its offset ``ŵ`` taking what they held, so that it predicts and commands
+    as before (``AdaptiveFeedback.move_nominal``): a bumpless hand-over of the load from the law
+    to the nominal torque (docs/robot.md, "A payload estimated in the hold", has the ways
+    tried).
 
     Parameters
     ----------
@@ -224,7 +225,7 @@ class PayloadCarry:
         before, self.carried_kg = self.carried_kg, target
         return PayloadStep(
             f"{held}; the model carries {target:.3g} kg from the next sample (was "
-            f"{before:.3g} kg) and the adaptive law's integral and offset start again from zero",
+            f"{before:.3g} kg); the adaptive law hands the load it held over to the nominal torque",
             target,
         )
 

@@ -314,11 +314,24 @@ class Rls:
         self._views[self._cur].theta_t[:, : p + q] += delta
         self._can_undo = False
 
-    def clear_offset(self) -> None:
-        """Set ``ŵ`` to zero, ``[F̂ Ĝ]`` and ``P`` kept: what the offset held is in the
-        nominal torque now (robot mode carrying an estimated payload). The last update can no
-        longer be taken back."""
-        self._views[self._cur].theta_t[:, self._p + self._q] = 0.0
+    def move_input_origin(self, shift: np.ndarray) -> None:
+        """Measure every input ``δu_j`` from an origin ``shift`` (shape (n,)) higher: ``ŵ``
+        takes what the inputs held, ``ŵ ← ŵ + (Σ_j Ĝ_j) shift``, so that ``Θᵀz`` is the same
+        for every regressor once its inputs are ``δu_j - shift``. ``[F̂ Ĝ]`` and ``P`` are
+        kept (the exact change of coordinates would move the inputs' uncertainty into ``ŵ``'s
+        block of ``P``, which the per-block trace bound is not made for). For a nominal
+        torque that takes on a load the law held (robot mode carrying an estimated payload).
+        The last update can no longer be taken back.
+
+        Raises
+        ------
+        RlsError
+            On a wrong shape or a non-finite entry (the estimate is unchanged then).
+        """
+        p, q = self._p, self._q
+        shift = _vector("shift", shift, self._n)
+        theta_t = self._views[self._cur].theta_t
+        theta_t[:, p + q] += theta_t[:, p : p + q] @ np.tile(shift, q // self._n)
         self._can_undo = False
 
     def undo(self) -> None:

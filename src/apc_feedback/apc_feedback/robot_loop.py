@@ -455,7 +455,7 @@ class RobotLoop:
         self.hold.sent(self._sent[1], self.gravity(sample.position))
         self.count("commands")
         if self.payload is not None:
-            self._carry_payload(k, sample.position)
+            self._carry_payload(k, sample.position, setpoint.q)
         if out.skipped:
             self.count("rls_skipped_updates")
         if out.rejected:
@@ -577,19 +577,19 @@ class RobotLoop:
             "adaptive law restarts its identification from Eq. 33",
         )
 
-    def _carry_payload(self, k: int, position: np.ndarray) -> None:
-        """Sample ``k``'s commanded torque to the payload's estimate; once it is in, the
-        model carries it from the next sample and the law forgets what held it."""
+    def _carry_payload(self, k: int, position: np.ndarray, held: np.ndarray) -> None:
+        """Sample ``k``'s command to the payload's estimate; once it is in, the plan's model
+        carries it from the hold at ``held``, the law handing its load over (``move_nominal``)."""
         assert self.payload is not None and self._sent is not None
-        fallback = self.supervisor is not None and self.supervisor.in_charge != ADAPTIVE
-        holding = self.plan.holding(k + 1) and not fallback
-        step = self.payload.observe(position, self._sent[1], holding)
+        adaptive = self.supervisor is None or self.supervisor.in_charge == ADAPTIVE
+        step = self.payload.observe(position, self._sent[1], adaptive and self.plan.holding(k + 1))
         if step.text is not None:
             self.log("info", f"sample {k}: {step.text}")
         if step.carry_kg is not None:
-            model, self.gravity = self.payload.model_with(step.carry_kg)
+            model, gravity = self.payload.model_with(step.carry_kg)
             self.plan.carry(model, k + 1)
-            getattr(self.law, "forget_offset", lambda: None)()
+            shift, self.gravity = gravity(held) - self.gravity(held), gravity
+            getattr(self.law, "move_nominal", lambda _: None)(shift)
             self.count("payload_carried")
 
     def _hold_command(self, learned: bool = False) -> np.ndarray | None:
