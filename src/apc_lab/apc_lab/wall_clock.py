@@ -163,8 +163,9 @@ def _worst(rows: list[list[float] | None]) -> list[float] | None:
 def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """One cell's runs summed up: the worst max and final error per joint over the runs that
     did not fail, runs lost and failed, every supervisor counter and robot_node's
-    :data:`TIMING_COUNTERS` summed over the runs, and the most cores other jobs used during one
-    of them (None when no run says)."""
+    :data:`TIMING_COUNTERS` summed over the runs, and the most cores other jobs used, and the
+    most the hypervisor took from the machine (steal), during one of them (None when no run
+    says)."""
     done = [r for r in runs if not r.get("failed")]
     supervisor: dict[str, int] = {}
     for r in done:
@@ -181,13 +182,18 @@ def aggregate_cell(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             k: sum(int((r.get("robot_node_counters") or {}).get(k, 0)) for r in done)
             for k in TIMING_COUNTERS
         },
-        "other_cores_max": max(other) if (other := _other_cores(runs)) else None,
+        "other_cores_max": max(other) if (other := _load(runs, "other_cores")) else None,
+        "steal_cores_max": max(steal) if (steal := _load(runs, "steal_cores")) else None,
     }
 
 
-def _other_cores(runs: Sequence[Mapping[str, Any]]) -> list[float]:
-    loads = [(r.get("machine_load") or {}).get("other_cores") for r in runs]
+def _load(runs: Sequence[Mapping[str, Any]], key: str) -> list[float]:
+    loads = [(r.get("machine_load") or {}).get(key) for r in runs]
     return [float(v) for v in loads if v is not None]
+
+
+def _or_dash(value: Any) -> str:
+    return "-" if value is None else str(value)
 
 
 def degrees_text(values: Sequence[float] | None) -> str:
@@ -206,7 +212,9 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
         f"Wall time, not simulated time: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; "
         f"load average before/after {result.get('load_average_before', '?')} / "
         f"{result.get('load_average_after', '?')}; other jobs used "
-        f"{load.get('other_cores', '?')} cores on average meanwhile "
+        f"{load.get('other_cores', '?')} cores on average meanwhile and the hypervisor took "
+        f"{load.get('steal_cores', '?')} (steal: time the machine's cores ran someone else; a "
+        f"run it takes from misses its driver's cycles) "
         f"({result.get('wall_s', '?')} s, {result.get('started_utc', '?')}).",
         "",
         f"Errors: the controllers' samples against their set points, worst run per joint (deg); "
@@ -216,7 +224,7 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
         "| arm | effects | driver Hz | law | runs lost / failed | max error | final error "
         "| hand-overs / hand-backs | other supervisor counts | "
         + " / ".join(k.replace("_", " ") for k in TIMING_COUNTERS)
-        + " | other jobs (cores, worst run) |",
+        + " | other jobs / steal (cores, worst run) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for cell in result.get("cells", []):
@@ -230,7 +238,7 @@ def markdown(result: Mapping[str, Any], heading: str = "#") -> str:
             f"| {s['lost']}/{s['runs']} / {s['failed']} | {degrees_text(s['worst_max_error_deg'])} "
             f"| {degrees_text(s['worst_final_error_deg'])} | {over} / {back} | {others or '-'} "
             f"| {faults} "
-            f"| {'-' if s.get('other_cores_max') is None else s['other_cores_max']} |"
+            f"| {_or_dash(s.get('other_cores_max'))} / {_or_dash(s.get('steal_cores_max'))} |"
         )
     failures = [
         f"- {c['arm']} {c['effects']} {c['rate_hz']:g} Hz {c['law']} run {i + 1}: {r['failed']}"

@@ -133,8 +133,11 @@ def test_a_cell_takes_the_worst_joint_over_runs_counts_lost_and_ignores_failed_r
         "watchdog": 0,
     }
     assert cell["other_cores_max"] is None  # no run said how busy the machine was
-    runs[0]["machine_load"], runs[1]["machine_load"] = {"other_cores": 0.3}, {"other_cores": 0.9}
-    assert wall_clock.aggregate_cell(runs)["other_cores_max"] == 0.9
+    assert cell["steal_cores_max"] is None
+    runs[0]["machine_load"] = {"other_cores": 0.3, "steal_cores": 0.6}
+    runs[1]["machine_load"] = {"other_cores": 0.9, "steal_cores": 0.1}
+    loaded = wall_clock.aggregate_cell(runs)
+    assert loaded["other_cores_max"] == 0.9 and loaded["steal_cores_max"] == 0.6
 
     nothing = wall_clock.aggregate_cell([runs[3]])
     assert nothing["worst_max_error_deg"] is None and nothing["lost"] == 0
@@ -147,7 +150,7 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
     ]
     result = {
         "machine": {"cpu": "Test CPU 9000", "cores": 2},
-        "machine_load": {"other_cores": 0.4},
+        "machine_load": {"other_cores": 0.4, "steal_cores": 0.05},
         "load_average_before": [1.0, 1.0, 1.0],
         "load_average_after": [1.5, 1.0, 1.0],
         "cells": [
@@ -163,8 +166,9 @@ def test_the_table_names_the_machine_the_clock_and_each_cell():
     }
     text = wall_clock.markdown(result)
     assert "Wall time" in text and "Test CPU 9000, 2 cores" in text and "0.4 cores" in text
+    assert "the hypervisor took 0.05 (steal" in text
     row = "| puma3 | physical | 250 | adaptive recommended | 0/2 / 1 | 1.00 0.25 3.00 "
-    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | 0 / 0 / 0 / 0 | - |" in text
+    assert row + "| 0.10 0.00 0.40 | 2 / 2 | - | 0 / 0 / 0 / 0 | - / - |" in text
     assert "puma3 physical 250 Hz adaptive recommended run 2: robot_node refused" in text
 
 
