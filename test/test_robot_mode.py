@@ -443,7 +443,9 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
     driver = graph.add(Driver(graph.context, time_scale=TIME_SCALE))
     observer = graph.add(rclpy.create_node("observer", context=graph.context))
     diag = Diagnostics(observer, "/robot_node")
-    with _controllers(tmp_path, use_sim_time=True, path_tolerance=[0.0002]):
+    # 0.02 mrad: no law follows the move that closely (with the payload estimated in the hold,
+    # as the robot file does, the law follows it within 0.2 mrad)
+    with _controllers(tmp_path, use_sim_time=True, path_tolerance=[0.00002]):
         graph.spin_until(lambda: len(driver.commands) > 20, 30, "commands")
         # no joint states (the clock runs on): one gravity hold, then silence
         n = len(driver.commands)
@@ -471,7 +473,7 @@ def test_watchdog_holds_then_recovers_and_path_tolerance_aborts_the_goal(graph, 
         _spin_sim(graph, driver, 0.2)
         assert _max_deviation_deg(driver, t_rest, q_rest) < 0.1
         assert np.max(np.abs(q_rest - q_back)) < 10.0
-        # a move the arm cannot follow within 0.2 mrad: aborted, the measured position held
+        # a move the arm cannot follow within 0.02 mrad: aborted, the measured position held
         goals = _goal_publisher(graph, observer)
         goals.publish(_goal_msg(GOAL_DEG))
         graph.spin_until(lambda: diag.count("path_tolerance_aborts") >= 1, 20, "the abort")
