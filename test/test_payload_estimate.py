@@ -9,12 +9,16 @@ import pinocchio as pin
 import pytest
 
 from apc_core.robot import Payload, load_robot, with_payload
+from apc_feedback.baselines import PD, PdGains
+from apc_feedback.command_map import CommandMap
 from apc_feedback.payload_estimate import (
     PayloadCarry,
     PayloadEstimateConfig,
     PayloadEstimateError,
     payload_carry,
 )
+from apc_feedback.robot_loop import RobotLoop
+from apc_feedback.robot_sampling import RobotSamplingConfig
 from apc_feedback.supervisor import SupervisorConfig
 from apc_feedforward.goals import GoalQueue
 from apc_feedforward.nominal import Feedforward
@@ -175,6 +179,22 @@ def test_an_unknown_frame_is_refused_and_disabled_is_none():
         payload_carry(PUMA, PayloadEstimateConfig(enable=True, frame="no_such_link"), T)
     assert exc.value.field == "frame"
     assert payload_carry(PUMA, PayloadEstimateConfig(), T) is None
+
+
+def test_a_law_that_cannot_hand_its_load_over_is_refused_an_estimate():
+    """A baseline law keeps the nominal torque it is given: carrying an estimated payload into
+    that torque would add the load to what the law already holds."""
+    plan = GoalQueue(PUMA.model, T, PUMA.joint_names, PUMA.position_limits)
+    with pytest.raises(ValueError, match="hands its load over"):
+        RobotLoop(
+            law=PD(3, PdGains(kp=100.0, kv=10.0)),
+            sampling=RobotSamplingConfig(period=T),
+            command=CommandMap(PUMA.joint_names, PUMA.joint_names, PUMA.effort_limit),
+            plan=plan,
+            gravity=_gravity(PUMA),
+            path_tolerance=np.zeros(3),
+            payload=_carry(),
+        )
 
 
 def test_the_plan_carries_a_model_only_in_a_hold():

@@ -135,7 +135,8 @@ class RobotLoop:
         instead of a start: the caller builds the loop again at it (else: a start, and a warning).
     payload : PayloadCarry, optional
         Estimates the payload at the first still hold of an activation and carries it in the
-        plan's model and ``gravity`` (``payload_carried``); None: the model stays.
+        plan's model and ``gravity`` (``payload_carried``), the law (``move_nominal``: the
+        adaptive law's) handing that load over; None: the model stays.
     """
 
     law: FeedbackLaw
@@ -159,9 +160,10 @@ class RobotLoop:
             raise ValueError(f"stop_time must be finite and >= 0 s, got {self.stop_time}")
         if (self.supervisor is None) != (self.fallback is None):
             raise ValueError("a supervisor needs a fallback law and a fallback a supervisor")
+        if self.payload is not None and not hasattr(self.law, "move_nominal"):
+            raise ValueError("a payload estimate needs a law that hands its load over")
         self._limit = self.command.to_model(self.command.limit)
-        # A law that can learn after its command (AdaptiveFeedback) and one that models when a
-        # command acts; None for others.
+        # The adaptive law's learning after its command, its model of when a command acts.
         self._settle = getattr(self.law, "settle", None) if self.command_first else None
         if self._settle is not None:
             self.law.defer_learning = True
@@ -465,8 +467,7 @@ class RobotLoop:
     def _update(
         self, law: FeedbackLaw, args: tuple, u_n: np.ndarray, applied: np.ndarray | None
     ) -> FeedbackOutput | None:
-        """One step of ``law``; None (counted, logged) when it fails or its torque is not
-        finite."""
+        """One step of ``law``; None (counted, logged) if it fails or its torque is not finite."""
         k = args[0]
         try:
             out = law.update(*args, u_n, applied)
@@ -578,8 +579,7 @@ class RobotLoop:
         )
 
     def _carry_payload(self, k: int, position: np.ndarray, held: np.ndarray) -> None:
-        """Sample ``k``'s command to the payload's estimate; once it is in, the plan's model
-        carries it from the hold at ``held``, the law handing its load over (``move_nominal``)."""
+        """Sample ``k``'s command to the payload's estimate; once in, the plan carries it."""
         assert self.payload is not None and self._sent is not None
         adaptive = self.supervisor is None or self.supervisor.in_charge == ADAPTIVE
         step = self.payload.observe(position, self._sent[1], adaptive and self.plan.holding(k + 1))
@@ -589,7 +589,7 @@ class RobotLoop:
             model, gravity = self.payload.model_with(step.carry_kg)
             self.plan.carry(model, k + 1)
             shift, self.gravity = gravity(held) - self.gravity(held), gravity
-            getattr(self.law, "move_nominal", lambda _: None)(shift)
+            self.law.move_nominal(shift)
             self.count("payload_carried")
 
     def _hold_command(self, learned: bool = False) -> np.ndarray | None:
