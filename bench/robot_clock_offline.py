@@ -364,7 +364,8 @@ def parser() -> argparse.ArgumentParser:
     cli.add_argument(
         "--payload-estimate",
         action="store_true",
-        help="robot mode estimates the payload in the hold (payload_estimate.enable)",
+        help="robot mode estimates the payload in the hold (payload_estimate.enable), as the "
+        "robot files do; without it the grid measures the law alone",
     )
     cli.add_argument(
         "--alpha-model",

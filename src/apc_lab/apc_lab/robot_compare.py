@@ -50,6 +50,7 @@ import apc_msgs_py as wire
 from apc_core.nodeutil import StopSignals, destroy_nodes, make_executor
 from apc_core.params import ConfigError
 from apc_core.robot import example_robot_urdf
+from apc_feedback.payload_estimate import PayloadEstimateConfig
 from apc_feedback.presets import DEFAULT_PRESET, PRESETS
 from apc_lab.experiment import (
     Progress,
@@ -83,6 +84,7 @@ SIM_WAIT_S = 0.5
 #: robot's clock; in sim time without it a command would act over its own state's cycle.
 COMMAND_LATENCY_S = 0.0005
 
+_ESTIMATE = PayloadEstimateConfig()
 #: What the report says about these runs, before the tables.
 SUMMARY = (
     "The simulated ros2_control robot (robot_sim: joint_state_broadcaster-style `/joint_states` "
@@ -97,7 +99,11 @@ SUMMARY = (
     "drive from quantised positions over one driver period and a one-driver-period command "
     "delay, from each arm's data (apc_plant_sim/effects.py); the controllers are told the "
     "rotor inertia (`armature`), as a geared arm's user tells it. The pickup: 5 lb picked up "
-    f"{PICKUP_AFTER_S:g} s into the move. Cells: max / final error (deg)."
+    f"{PICKUP_AFTER_S:g} s into the move. Every law runs with the same robot-mode settings, "
+    "without the robot files' payload estimate (`payload_estimate.enable`, which only the "
+    "adaptive law can take and which needs a still hold of "
+    f"{_ESTIMATE.settle_s + _ESTIMATE.window_s:g} s): the laws compared as they are. "
+    "Cells: max / final error (deg)."
 )
 CASES = ("a", "b", "c", "pickup")
 #: What the arm adds: nothing, or every effect of a physical arm (its data, :mod:`effects`).
