@@ -21,6 +21,7 @@ error at the move's end (deg, worst joint). About three minutes on one core; the
 every run.
 
     .venv/bin/python bench/activation_bursts.py [--arms panda] [--rates 250] [--json FILE]
+        [--payload-estimate]
 """
 
 from __future__ import annotations
@@ -74,10 +75,13 @@ def latency(run: dict[str, Any], driver_ms: float) -> Latency:
     return Latency(late_ms=late_ms, probability=0.3, seed=run["seed"])
 
 
-def one_run(arm: str, rate_hz: float, run: dict[str, Any]) -> dict[str, Any]:
+def one_run(
+    arm: str, rate_hz: float, run: dict[str, Any], payload_estimate: bool = False
+) -> dict[str, Any]:
     """One run (the offline grid's, :func:`robot_clock_offline.one_run`, with this run's
-    lateness and payload): its max error and error at the move's end (worst joint, deg) and
-    hand-overs."""
+    lateness and payload; ``payload_estimate``: robot mode estimates the payload in the hold,
+    as the robot files have it): its max error and error at the move's end (worst joint, deg)
+    and hand-overs."""
     result = robot_clock_offline.one_run(
         arm,
         "physical",
@@ -87,6 +91,7 @@ def one_run(arm: str, rate_hz: float, run: dict[str, Any]) -> dict[str, Any]:
         SupervisorConfig(),
         latency=latency(run, 1000.0 / rate_hz),
         payload_factor=run["payload"],
+        payload_estimate=payload_estimate,
     )
     return {
         **run,
@@ -120,6 +125,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     parser.add_argument("--rates", nargs="+", type=float, default=list(RATES_HZ))
     parser.add_argument("--json", type=Path, default=RESULTS_JSON)
+    parser.add_argument(
+        "--payload-estimate",
+        action="store_true",
+        help="robot mode estimates the payload in the hold, as the robot files do",
+    )
     args = parser.parse_args(argv)
     cells = []
     print(
@@ -130,7 +140,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     for arm in args.arms:
         for rate in args.rates:
             for kind in ("burst", "late"):
-                runs = [one_run(arm, rate, r) for r in cell_runs() if r["kind"] == kind]
+                runs = [
+                    one_run(arm, rate, r, args.payload_estimate)
+                    for r in cell_runs()
+                    if r["kind"] == kind
+                ]
                 s = summarise(runs)
                 cells.append({"arm": arm, "rate_hz": rate, "kind": kind, **s, "each": runs})
                 print(
@@ -139,7 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     f"{s['median_max_deg']:.2f} | {s['move_end_deg']:.2f} |",
                     flush=True,
                 )
-    args.json.write_text(json.dumps({"simulated_time": True, "cells": cells}, indent=1) + "\n")
+    results = {"simulated_time": True, "payload_estimate": args.payload_estimate, "cells": cells}
+    args.json.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {args.json}", file=sys.stderr)
     return 0
 
