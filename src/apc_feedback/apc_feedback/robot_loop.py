@@ -127,8 +127,8 @@ class RobotLoop:
         and learns after the publish (:meth:`command_published`; ``defer_learning``): for
         T = 1 ms (docs/robot.md, "A robot's clock").
     feedforward_ahead : bool
-        Send the nominal torque of the sample the law models the command acting over, whole
-        samples after its own (:meth:`RobotSampler.samples_late`; docs/robot.md).
+        Send the nominal torque of the interval the law models the command acting over, whole
+        samples on (:meth:`RobotSampler.samples_late`); its middle with a plan built so.
     period_from_driver : bool
         At the first start after activation, for a driver whose period T should be a multiple
         of (:func:`~apc_feedback.robot_sampling.period_advice`), ``Step(retime=that multiple)``

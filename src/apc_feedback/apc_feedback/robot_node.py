@@ -18,8 +18,8 @@ A lifecycle node (``ros2 lifecycle set /robot_node configure``, ``activate``, ``
   its period nearest T (``period_from_driver``). The feedforward's plan, inside this node
   (:class:`apc_feedforward.goals.GoalQueue`, as joint_trajectory_controller samples its
   trajectory in ``update()``), gives set point k and the nominal torque ``u_n`` of the sample
-  its command acts over (``feedforward_ahead``: ``u_n(k + m)`` when it acts m whole samples
-  late, else ``u_n(k)``): the first
+  its command acts over (``feedforward_ahead``: ``u_n((k + m + 1/2) T)`` when it acts m whole
+  samples late, the middle of the interval it is held over; else ``u_n(kT)``): the first
   sample holds the measured position (or starts ``move.goal_deg``), goals on
   ``feedforward/trajectory`` (``trajectory_msgs/JointTrajectory``, any joint order) start when
   the motion before them ends. The command ``u_n + du(k)`` goes out in the same callback as
@@ -209,9 +209,10 @@ PARAMS: tuple[Param, ...] = (
     Param(
         "feedforward_ahead",
         True,
-        "the nominal torque sent with a sample is the plan's of the sample over which the "
+        "the nominal torque sent with a sample is the plan's over the interval in which the "
         "adaptive law models its command acting (whole samples of its input delay later: a "
-        "driver period of about T or more), not the sample's own",
+        "driver period of about T or more), at that interval's middle; false: at the sample's "
+        "own time",
     ),
     Param(
         "period_from_driver",
@@ -337,7 +338,7 @@ class RobotNode(LifecycleNode):
             law=law,
             sampling=sampling,
             command=command,
-            plan=GoalQueue.from_params(robot, values),
+            plan=GoalQueue.from_params(robot, values, values["feedforward_ahead"]),
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=_per_joint("path_tolerance", values["path_tolerance"], robot.n_joints),
             stop_time=values["stop_time"],

@@ -148,6 +148,10 @@ class GoalQueue:
         that position until a goal arrives.
     move : dict
         ``FourThreeFour`` keywords of the first move (segment_times, lift_off, set_down).
+    interval_middle : bool
+        Every nominal torque at the middle of the interval its command is held over
+        (:class:`~apc_feedforward.nominal.Feedforward`'s ``interval_middle``: robot mode's
+        ``feedforward_ahead``); off for the paper's sampled law.
     """
 
     def __init__(
@@ -159,8 +163,10 @@ class GoalQueue:
         *,
         first_goal: np.ndarray | None = None,
         move: dict[str, Any] | None = None,
+        interval_middle: bool = False,
     ) -> None:
         self.model = model
+        self.interval_middle = interval_middle
         self.period = period
         self.joint_names = list(joint_names)
         self.position_limits = position_limits
@@ -175,7 +181,9 @@ class GoalQueue:
         self._next_plan: tuple[wire.TrajectoryGoal, int, Trajectory, Feedforward] | None = None
 
     @classmethod
-    def from_params(cls, robot: Robot, values: Mapping[str, Any]) -> GoalQueue:
+    def from_params(
+        cls, robot: Robot, values: Mapping[str, Any], interval_middle: bool = False
+    ) -> GoalQueue:
         """Built from the node's parameter values (:data:`MOVE_PARAMS` and ``period``) for the
         controller's ``robot``; a bad value raises ConfigError naming it."""
         n = robot.n_joints
@@ -196,6 +204,7 @@ class GoalQueue:
                 lift_off=values["move.lift_off"],
                 set_down=values["move.set_down"],
             ),
+            interval_middle=interval_middle,
         )
 
     # -- goals ----------------------------------------------------------------------------------
@@ -292,7 +301,7 @@ class GoalQueue:
         if lower.shape == rest.shape and upper.shape == rest.shape:
             rest = np.clip(rest, np.minimum(lower, position), np.maximum(upper, position))
         plan = Quintic(position, rest, duration, qd0=velocity)
-        self.feedforward = Feedforward(self.model, plan, self.period, k)
+        self.feedforward = self._feedforward(plan, k)
         self._stop_plan = plan
 
     def stopping(self, k: int) -> bool:
@@ -317,7 +326,7 @@ class GoalQueue:
         self._next_plan = None
         ff = self.feedforward
         assert ff is not None
-        self.feedforward = Feedforward(model, ff.trajectory, self.period, ff.start_k)
+        self.feedforward = self._feedforward(ff.trajectory, ff.start_k)
 
     def rejoin(self, k: int, position: np.ndarray, velocity: np.ndarray, duration: float) -> bool:
         """Rejoin the plan from the measured state at sample ``k`` (robot mode's hand-back from
@@ -345,9 +354,7 @@ class GoalQueue:
             # it and hold the last set point, so the loop keeps its nominal torque.
             out.plan_error = exc
             hold = self._last_q if self._last_q is not None else position
-            self.feedforward = Feedforward(
-                self.model, Quintic(hold, hold, self.period), self.period, k
-            )
+            self.feedforward = self._feedforward(Quintic(hold, hold, self.period), k)
             try:
                 self._compute(k, position, render, out)
             except ValueError as exc2:
@@ -371,7 +378,7 @@ class GoalQueue:
             cached = self._planned_next(goal, end)
             if cached is None:
                 plan = self._plan_after(ff, goal)  # a goal _advance refuses raises here too
-                cached = (goal, end, plan, Feedforward(self.model, plan, self.period, end))
+                cached = (goal, end, plan, self._feedforward(plan, end))
                 self._next_plan = cached
             u_n = cached[3].sample(later).u_n
         except ValueError:  # FeedforwardError, TrajectoryError
@@ -386,12 +393,16 @@ class GoalQueue:
                 plan: Trajectory = FourThreeFour(position, self.first_goal, **self.move)
             else:
                 plan = Quintic(position, position, self.period)
-            self.feedforward = Feedforward(self.model, plan, self.period, k)
+            self.feedforward = self._feedforward(plan, k)
         self._advance(k, out)
         sp = self.feedforward.sample(k)
         out.rendered = render(sp)
         out.setpoint = sp
         self._last_q = sp.q
+
+    def _feedforward(self, plan: Trajectory, start_k: int) -> Feedforward:
+        """``plan``'s feedforward on the queue's model from sample ``start_k``."""
+        return Feedforward(self.model, plan, self.period, start_k, self.interval_middle)
 
     def _advance(self, k: int, out: Sampled[Any]) -> None:
         """Start the next queued goal once the current motion has ended.

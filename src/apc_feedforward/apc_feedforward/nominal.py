@@ -114,10 +114,21 @@ class Feedforward:
         Sampling period T (s).
     start_k : int
         Sample index at which the trajectory's t = 0 falls.
+    interval_middle : bool
+        Each set point's nominal torque is the plan's at ``(k + 1/2) T``, the middle of the
+        interval a command computed at sample ``k`` is held over: a second-order approximation
+        of the interval's mean torque, which is what a held command should carry (robot mode,
+        ``feedforward_ahead``); its ``q``, ``qd``, ``qdd`` stay at ``kT``, where the error is
+        measured. Off: Eqs. 2-8 at ``kT``, as the paper's sampled law takes them.
     """
 
     def __init__(
-        self, model: pin.Model, trajectory: Trajectory, period: float, start_k: int = 0
+        self,
+        model: pin.Model,
+        trajectory: Trajectory,
+        period: float,
+        start_k: int = 0,
+        interval_middle: bool = False,
     ) -> None:
         if not period > 0.0:
             raise FeedforwardError(f"period must be > 0 s, got {period}")
@@ -131,7 +142,9 @@ class Feedforward:
         self.period = float(period)
         self.trajectory = trajectory
         self.start_k = int(start_k)
-        self._block: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.interval_middle = bool(interval_middle)
+        # (first k, q, qd, qdd at the samples, q, qd, qdd where the nominal torque is taken)
+        self._block: tuple[int, *tuple[np.ndarray, ...]] | None = None
 
     def set_trajectory(self, trajectory: Trajectory, start_k: int) -> None:
         """Replace the plan; it starts at sample ``start_k``."""
@@ -159,15 +172,21 @@ class Feedforward:
         t = (k - self.start_k) * self.period
         block = self._block
         if block is None or not block[0] <= k < block[0] + BLOCK:
-            ks = np.arange(k, k + BLOCK)
-            arrays = self.trajectory.sample_many((ks - self.start_k) * self.period)
+            times = (np.arange(k, k + BLOCK) - self.start_k) * self.period
+            arrays = self.trajectory.sample_many(times)
             for a in arrays:  # the set points hand out rows: nobody may write through them
                 a.flags.writeable = False
-            block = (k, *arrays)
+            if self.interval_middle:
+                torque_at = self.trajectory.sample_many(times + 0.5 * self.period)
+            else:
+                torque_at = arrays
+            block = (k, *arrays, *torque_at)
             self._block = block
         i = k - block[0]
         q, qd, qdd = block[1][i], block[2][i], block[3][i]
-        u_n = nominal_torque(self.model, self._data, q, qd, qdd, self._friction)
+        u_n = nominal_torque(
+            self.model, self._data, block[4][i], block[5][i], block[6][i], self._friction
+        )
         return Setpoint(k=k, t=t, q=q, qd=qd, qdd=qdd, u_n=u_n)
 
     def acting_later(self, setpoint: Setpoint, samples: int) -> Setpoint:

@@ -377,3 +377,31 @@ def test_the_torque_of_when_a_command_acts_past_a_moves_end_is_the_next_goals(ro
         q.sample(k, Q0, keep)
     assert_array_equal(ahead.u_n, q.sample(end + 1, Q0, keep).setpoint.u_n)
     assert len(planned) == 1
+
+
+def test_a_queue_with_interval_middle_builds_every_plan_so(robot):
+    """The first move, a queued goal looked ahead at, a stop and a carried model all take
+    their nominal torque at the middle of a command's interval when the queue is built so,
+    and only then."""
+    q = GoalQueue(
+        robot.model,
+        T,
+        robot.joint_names,
+        robot.position_limits,
+        first_goal=Q0 + 0.2,
+        move=MOVE,
+        interval_middle=True,
+    )
+    q.sample(0, Q0, keep)
+    assert q.feedforward.interval_middle
+    q.add(goal([0.5], [Q0 + 0.3]))
+    end = q.feedforward.end_k()
+    q.acting_later(q.sample(end - 1, Q0, keep).setpoint, 2)
+    assert q._next_plan is not None and q._next_plan[3].interval_middle
+    q.stop(end, Q0, np.full(3, 0.1), 0.2)
+    assert q.feedforward.interval_middle
+    q.restart()
+    q.sample(end + 100, Q0, keep)
+    q.carry(robot.model, end + 101)
+    assert q.feedforward.interval_middle
+    assert not queue(robot).interval_middle

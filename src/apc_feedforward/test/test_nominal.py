@@ -42,3 +42,25 @@ def test_friction_adds_viscous_and_smoothed_coulomb_torque_at_the_planned_veloci
     assert_allclose(at_rest.u_n, plain.sample(0).u_n, atol=1e-12)
     moving = told.sample(50)
     assert np.all(np.abs(moving.u_n - plain.sample(50).u_n) > 0.9 * coulomb)
+
+
+def test_with_interval_middle_the_torque_is_the_plans_half_a_period_on():
+    """A command computed at sample k is held over [kT, (k+1)T): its nominal torque is the
+    plan's at the interval's middle, its set point the plan's at kT (where the error is
+    measured). Without the option the torque is the set point's own, bit for bit."""
+    arm = _arm()
+    plan, period = _plan(), 0.01
+    middle, own = (
+        Feedforward(arm.model, plan, period, 5, True),
+        Feedforward(arm.model, plan, period, 5),
+    )
+    data = arm.model.createData()
+    for k in (0, 5, 6, 42, 104, 105, 300):
+        sp, at_k = middle.sample(k), own.sample(k)
+        for name in ("q", "qd", "qdd"):
+            assert_array_equal(getattr(sp, name), getattr(at_k, name))
+        q, qd, qdd = plan.sample((k - 5 + 0.5) * period)
+        assert_allclose(sp.u_n, pin.rnea(arm.model, data, q, qd, qdd), atol=1e-9)
+    moving = middle.sample(40)
+    assert np.abs(moving.u_n - own.sample(40).u_n).max() > 1e-3  # the torque changes mid-move
+    assert_array_equal(middle.sample(400).u_n, own.sample(400).u_n)  # held: no change

@@ -242,7 +242,7 @@ def run_robot_loop(
         before (simulated time has no compute time, so only its cost shows here).
     feedforward_ahead : bool
         Robot mode's ``feedforward_ahead`` (on, as robot mode's default): the nominal torque of
-        the sample over which the law models the command acting.
+        the interval over which the law models the command acting, at its middle.
     period_from_driver : bool
         Robot mode's ``period_from_driver``: where the loop asks for another T at its first
         start, it is built again at that T (``setup`` called again), as ``robot_node`` does.
@@ -307,7 +307,13 @@ def run_robot_loop(
             law=AdaptiveFeedback(controller.model, config),
             sampling=RobotSamplingConfig(period=T),
             command=CommandMap(robot.joint_names, command_joints, robot.effort_limit),
-            plan=GoalQueue(controller.model, T, robot.joint_names, robot.position_limits),
+            plan=GoalQueue(
+                controller.model,
+                T,
+                robot.joint_names,
+                robot.position_limits,
+                interval_middle=feedforward_ahead,
+            ),
             gravity=lambda q: pin.computeGeneralizedGravity(controller.model, data, q).copy(),
             path_tolerance=np.full(n, 0.2),
             command_first=command_first,
