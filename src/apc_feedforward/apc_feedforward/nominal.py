@@ -162,7 +162,8 @@ class Feedforward:
         return self.start_k + steps
 
     def sample(self, k: int) -> Setpoint:
-        """Set point and nominal torque at sample ``k`` (time ``k * period``).
+        """Set point and nominal torque at sample ``k`` (time ``k * period``; the torque half a
+        period on with ``interval_middle``).
 
         The plan is evaluated :data:`BLOCK` samples at a time (one vectorised
         ``sample_many``) and read from that block while ``k`` is in it: the per-sample cost is
