@@ -397,8 +397,10 @@ def run_one(workdir: Path, spec: RunSpec) -> dict[str, Any]:
 def _progress_line(spec: RunSpec, runs: int, r: Mapping[str, Any]) -> str:
     head = f"{spec.arm} {spec.effects} {spec.rate_hz:g} Hz {spec.law} run {spec.index + 1}/{runs}"
     load = r["machine_load"]
-    steal = load.get("steal_cores", 0.0)
-    tail = f"other jobs {load['other_cores']} cores, steal {steal} cores, {load['wall_s']} s"
+    tail = (
+        f"other jobs {load['other_cores']} cores, steal {load['steal_cores']} cores, "
+        f"{load['wall_s']} s"
+    )
     if r.get("failed"):
         return f"{head}: FAILED {r['failed'].splitlines()[0]}; {tail}"
     sup = r.get("supervisor") or {}

@@ -338,7 +338,7 @@ class RobotNode(LifecycleNode):
             law=law,
             sampling=sampling,
             command=command,
-            plan=GoalQueue.from_params(robot, values, values["feedforward_ahead"]),
+            plan=GoalQueue.from_params(robot, values, interval_middle=values["feedforward_ahead"]),
             gravity=lambda q: pin.computeGeneralizedGravity(model, data, q).copy(),
             path_tolerance=_per_joint("path_tolerance", values["path_tolerance"], robot.n_joints),
             stop_time=values["stop_time"],

@@ -182,7 +182,7 @@ class GoalQueue:
 
     @classmethod
     def from_params(
-        cls, robot: Robot, values: Mapping[str, Any], interval_middle: bool = False
+        cls, robot: Robot, values: Mapping[str, Any], *, interval_middle: bool = False
     ) -> GoalQueue:
         """Built from the node's parameter values (:data:`MOVE_PARAMS` and ``period``) for the
         controller's ``robot``; a bad value raises ConfigError naming it."""
